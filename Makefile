@@ -1,0 +1,31 @@
+# Two commands on a fresh machine: `make demo` and `make test`. Both set everything up first.
+VENV ?= .venv
+PY := $(VENV)/bin/python
+SHARED ?= ../shared
+VMIC := $(SHARED)/scripts/virtual-mic.sh
+
+.PHONY: setup demo test bench lint
+
+setup: $(VENV)/.installed
+
+$(VENV)/.installed: pyproject.toml
+	bash scripts/install-system-packages
+	python3 -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[test]'
+	touch $@
+
+demo: setup
+	$(VENV)/bin/servant demo
+
+# The virtual microphone (a PulseAudio null sink) lets the capture tests record through PortAudio.
+test: setup
+	@if [ -x $(VMIC) ]; then bash $(VMIC) install || true; fi
+	@if [ -x $(VMIC) ] && vmic_env=$$(bash $(VMIC) start 2>/dev/null); then eval "$$vmic_env"; fi; \
+	PATH="$(abspath $(VENV))/bin:$$PATH" $(PY) -m pytest -q -p no:cacheprovider
+
+bench: setup
+	for b in bench/*.py; do $(PY) $$b || exit 1; done
+
+lint: setup
+	$(VENV)/bin/ruff check . && $(VENV)/bin/ruff format --check . && $(VENV)/bin/mypy servant_core

@@ -1,0 +1,119 @@
+"""Typed events the engine emits to its subscribers (the TUI, the headless CLI, tests).
+
+Every event carries `t`, the engine clock's time in seconds when it happened. Events are frozen
+dataclasses holding plain values and numpy arrays, so they can cross threads safely.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class SpectrumFrame:
+    """A short spectrum of the latest audio, for the live spectrum pane (~30 per second)."""
+
+    t: float
+    freqs: np.ndarray  # Hz, ascending
+    magnitude_db: np.ndarray  # dB re full scale, same length as freqs
+
+
+@dataclass(frozen=True)
+class Palette:
+    """The dominant colours of one frame, ordered by share (largest first)."""
+
+    t: float
+    colours: np.ndarray  # (k, 3) uint8, RGB
+    shares: np.ndarray  # (k,) float, sums to 1
+    matched_scene: str | None = None
+    matched_colours: np.ndarray | None = None  # the training palette it matched, (k, 3) RGB
+
+
+@dataclass(frozen=True)
+class AcousticPrediction:
+    t: float
+    scene: str | None  # None: unknown place (open set)
+    confidence: float  # the paper's eq. 1 in paper mode, else a probability in percent
+    scores: dict[str, float] = field(default_factory=dict)  # per scene, sums to 1 when calibrated
+
+
+@dataclass(frozen=True)
+class VisualPrediction:
+    t: float
+    scene: str | None
+    confidence: float  # the paper's eq. 2 in paper mode, else a probability in percent
+    scores: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class FusionState:
+    """Where the fusion policy stands: which window is open, how long is left."""
+
+    t: float
+    phase: str  # "listening" | "looking" | "confirming"
+    scene: str | None  # the acoustic scene being confirmed, if any
+    seconds_left: float | None
+    pictures_taken: int
+
+
+@dataclass(frozen=True)
+class Decision:
+    """A fused decision: the paper's terminal line and the averaged confidence."""
+
+    t: float
+    scene: str | None  # None: "No scene detected"
+    confidence: float  # average of the acoustic and visual confidences; 0.0 when no scene
+    line: str  # "CoffeeScene detected" / "No scene detected"
+    acoustic_confidence: float = 0.0
+    visual_confidence: float = 0.0
+
+
+@dataclass(frozen=True)
+class UnknownScene:
+    """The engine heard or saw a place it does not know, and asks the user to label it."""
+
+    t: float
+    sense: str  # "audio" | "image"
+    nearest_scene: str | None
+    window_id: str  # a handle the engine accepts back with the user's label
+
+
+@dataclass(frozen=True)
+class DeviceStatus:
+    t: float
+    device: str  # "microphone" | "camera" | "servo"
+    ok: bool
+    message: str
+
+
+@dataclass(frozen=True)
+class ArmState:
+    t: float
+    connected: bool
+    armed: bool
+    protocol: str | None
+    port: str | None
+    angles: dict[str, float]  # current angle per joint, degrees
+    target: dict[str, float] | None = None  # the pose about to be sent
+
+
+@dataclass(frozen=True)
+class ErrorEvent:
+    t: float
+    message: str  # one line: what is wrong and what to do
+
+
+Event = (
+    SpectrumFrame
+    | Palette
+    | AcousticPrediction
+    | VisualPrediction
+    | FusionState
+    | Decision
+    | UnknownScene
+    | DeviceStatus
+    | ArmState
+    | ErrorEvent
+)
