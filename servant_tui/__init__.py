@@ -1,0 +1,1 @@
+"""Servant's terminal application (Textual), over the engine in `servant_core`."""
