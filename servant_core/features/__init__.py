@@ -1,0 +1,1 @@
+"""Feature extraction: pure functions from windows and pictures to vectors."""

@@ -1,0 +1,140 @@
+"""What every recogniser is, and the pieces they share: labelling clusters, spreads, probabilities.
+
+A recogniser is a scikit-learn-style estimator for one sense (`"audio"` or `"image"`):
+
+- `featurize(items)`: stateless, depends only on the parameters. Audio: windows, a float32
+  array (n, samples) at `self.rate`. Image: a list of BGR uint8 pictures. Returns (n, ...).
+- `fit(X, scenes)` on featurized rows, returns `self`; learned attributes end in `_`;
+  `scenes_` lists the scenes in the column order of `predict_proba`.
+- `predict(X)` → str array, `UNKNOWN` where no scene can be named;
+  `confidence(X)` → percent (the paper's formulas in paper mode);
+  `predict_proba(X)` → (n, len(scenes_)) rows summing to one.
+- `get_state()` → (JSON-able header, dict of arrays); `from_state(header, arrays)` rebuilds it.
+  That is how models are saved without pickle (see `servant_core.modelfile`).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Protocol, Self
+
+import numpy as np
+
+from servant_core.errors import ServantError
+
+UNKNOWN = "<unknown>"
+
+
+class Recogniser(Protocol):
+    method: ClassVar[str]
+    sense: ClassVar[str]
+    scenes_: list[str]
+
+    def featurize(self, items: Any) -> np.ndarray: ...
+    def fit(self, X: np.ndarray, scenes: Sequence[str]) -> Self: ...
+    def predict(self, X: np.ndarray) -> np.ndarray: ...
+    def confidence(self, X: np.ndarray) -> np.ndarray: ...
+    def predict_proba(self, X: np.ndarray) -> np.ndarray: ...
+    def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]: ...
+
+    @classmethod
+    def from_state(cls, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> Self: ...
+
+
+@dataclass
+class ClusterLabels:
+    """Which scene each cluster stands for, by majority of its training members.
+
+    `cluster_scene[c]` is None for a cluster with no members or with a tie at the top;
+    `unowned_scenes` are scenes that no cluster stands for. Both are reported, never hidden.
+    """
+
+    cluster_scene: list[str | None]
+    tied_clusters: list[int] = field(default_factory=list)
+    empty_clusters: list[int] = field(default_factory=list)
+    unowned_scenes: list[str] = field(default_factory=list)
+
+    def warnings(self) -> list[str]:
+        lines = [f"cluster {c} has no majority scene (tie)" for c in self.tied_clusters]
+        lines += [f"cluster {c} has no training member" for c in self.empty_clusters]
+        lines += [f"scene {s!r} owns no cluster: it can never be predicted" for s in self.unowned_scenes]
+        return lines
+
+
+def label_clusters(clusters: np.ndarray, scenes: Sequence[str], n_clusters: int) -> ClusterLabels:
+    """Give each cluster the scene most of its members carry (pure; ties give None)."""
+    cluster_scene: list[str | None] = []
+    tied: list[int] = []
+    empty: list[int] = []
+    scenes_arr = np.asarray(scenes)
+    for c in range(n_clusters):
+        counts = Counter(scenes_arr[clusters == c].tolist()).most_common()
+        if not counts:
+            cluster_scene.append(None)
+            empty.append(c)
+        elif len(counts) > 1 and counts[0][1] == counts[1][1]:
+            cluster_scene.append(None)
+            tied.append(c)
+        else:
+            cluster_scene.append(counts[0][0])
+    owned = {s for s in cluster_scene if s is not None}
+    unowned = sorted(set(scenes_arr.tolist()) - owned)
+    return ClusterLabels(cluster_scene, tied, empty, unowned)
+
+
+def check_training_scenes(scenes: Sequence[str], n_rows: int) -> list[str]:
+    """The sorted distinct scenes; K-Means with one cluster per scene needs at least two."""
+    if len(scenes) != n_rows:
+        raise ValueError(f"{n_rows} feature rows but {len(scenes)} scene labels")
+    distinct = sorted(set(scenes))
+    if len(distinct) < 2:
+        found = distinct[0] if distinct else "none"
+        raise ServantError(
+            f"training needs at least two scenes, found one ({found}); add a second scene folder"
+        )
+    return distinct
+
+
+def cluster_spreads(X: np.ndarray, clusters: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """Root-mean-square distance of each cluster's members to their centre (its own spread).
+
+    An empty or single-member cluster takes the median spread of the others, so it is neither
+    infinitely sharp nor infinitely vague.
+    """
+    spreads = np.full(len(centres), np.nan)
+    for c in range(len(centres)):
+        members = X[clusters == c]
+        if len(members) > 1:
+            spreads[c] = np.sqrt(np.mean(np.sum((members - centres[c]) ** 2, axis=1)))
+    fallback = np.nanmedian(spreads) if np.any(np.isfinite(spreads)) else 1.0
+    spreads[~np.isfinite(spreads) | (spreads <= 0)] = fallback if fallback > 0 else 1.0
+    return spreads
+
+
+def scene_probabilities(
+    distances: np.ndarray,
+    spreads: np.ndarray,
+    cluster_scene: Sequence[str | None],
+    scenes: Sequence[str],
+) -> np.ndarray:
+    """Per-scene probabilities from distances to centres, each scaled by its cluster's spread.
+
+    A Gaussian likelihood per cluster, exp(-d²/2σ²)/σ^…, summed over the clusters of a scene and
+    normalised (computed in log space so that far points do not underflow to 0/0).
+    Clusters without a scene take no part.
+    """
+    scaled = distances / spreads[None, :]
+    log_like = -0.5 * scaled**2 - np.log(spreads)[None, :]
+    out = np.full((len(distances), len(scenes)), -np.inf)
+    for j, scene in enumerate(scenes):
+        cols = [c for c, s in enumerate(cluster_scene) if s == scene]
+        if cols:
+            out[:, j] = np.logaddexp.reduce(log_like[:, cols], axis=1)
+    top = np.max(out, axis=1, keepdims=True)
+    top[~np.isfinite(top)] = 0.0
+    probs = np.exp(out - top)
+    total = probs.sum(axis=1, keepdims=True)
+    uniform = np.full_like(probs, 1.0 / len(scenes))
+    return np.where(total > 0, probs / np.where(total > 0, total, 1.0), uniform)
