@@ -68,14 +68,18 @@ class SequentialFusion:
         self._restart()
         return [decision, self.state(t)]
 
-    def on_acoustic(self, scene: str | None, confidence: float, t: float) -> list[Decision | FusionState]:
+    def on_acoustic(
+        self, scene: str | None, confidence: float, t: float
+    ) -> list[Decision | FusionState]:
         events = self.tick(t)
         if self.opened_at is not None or scene is None or scene == UNKNOWN:
             return events
         self.scene, self.opened_at, self.acoustic_confidence = scene, t, float(confidence)
         return [*events, self.state(t)]
 
-    def on_visual(self, scene: str | None, confidence: float, t: float) -> list[Decision | FusionState]:
+    def on_visual(
+        self, scene: str | None, confidence: float, t: float
+    ) -> list[Decision | FusionState]:
         events = self.tick(t)
         if self.opened_at is None:
             return events  # a picture with no sound before it decides nothing
@@ -83,7 +87,9 @@ class SequentialFusion:
         self.last_picture_at = t
         if scene == self.scene:
             window = self.config.confirm_window_s
-            self.matches = [m for m in self.matches if t - m[0] <= window] + [(t, float(confidence))]
+            self.matches = [m for m in self.matches if t - m[0] <= window] + [
+                (t, float(confidence))
+            ]
             if len(self.matches) >= self.config.pictures_needed:
                 visual = sum(c for _, c in self.matches) / len(self.matches)
                 average = (self.acoustic_confidence + visual) / 2.0
@@ -97,4 +103,7 @@ class SequentialFusion:
     def wants_picture(self, t: float) -> bool:
         if self.opened_at is None:
             return False
-        return self.last_picture_at is None or t - self.last_picture_at >= self.config.picture_interval_s
+        return (
+            self.last_picture_at is None
+            or t - self.last_picture_at >= self.config.picture_interval_s
+        )
