@@ -238,8 +238,12 @@ class ServantApp(App[None]):
 
     def get_system_commands(self, screen: Screen[Any]) -> Iterable[SystemCommand]:
         yield from super().get_system_commands(screen)
-        yield SystemCommand("Arm or disarm", "Toggle whether the arm may move", self.action_toggle_arm)
+        yield SystemCommand(
+            "Arm or disarm", "Toggle whether the arm may move", self.action_toggle_arm
+        )
         yield SystemCommand("Teach", "Teach a scene and its pose, then train", self.action_teach)
-        yield SystemCommand("Library", "Scenes, recordings and pictures; retrain, evaluate", self.action_library)
+        yield SystemCommand(
+            "Library", "Scenes, recordings and pictures; retrain, evaluate", self.action_library
+        )
         yield SystemCommand("Settings", "Devices, joints and fusion windows", self.action_settings)
         yield SystemCommand("Keys", "Show the help screen", self.action_help)

@@ -29,7 +29,10 @@ async def test_live_screen_shows_the_replayed_afternoon(tmp_path):
         await settle(pilot, lambda: app.live.scene.decisions and app.live.spectrum.frames_shown)
         assert "CoffeeScene detected" in log_text(app)
         assert "No scene detected" in log_text(app)
-        assert [d.line for d in app.live.scene.decisions] == ["CoffeeScene detected", "No scene detected"]
+        assert [d.line for d in app.live.scene.decisions] == [
+            "CoffeeScene detected",
+            "No scene detected",
+        ]
         assert app.live.colours.palette.matched_scene == "CoffeeScene"
         assert app.query_one(Spectrum).frames_shown == 1
     assert engine.stopped.is_set(), "quitting must stop the engine"
@@ -74,7 +77,9 @@ async def test_unknown_place_prompts_and_labels(tmp_path):
 
 
 async def test_errors_are_logged_and_notified_not_fatal(tmp_path):
-    engine = ReplayEngine(script=[ErrorEvent(1.0, "camera: cannot open index 0; pick another in Settings")])
+    engine = ReplayEngine(
+        script=[ErrorEvent(1.0, "camera: cannot open index 0; pick another in Settings")]
+    )
     app = ServantApp(engine, library_root=tmp_path)
     async with app.run_test(size=(100, 30)) as pilot:
         await settle(pilot, lambda: app.live.log_view.lines)

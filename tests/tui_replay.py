@@ -42,7 +42,9 @@ def spectrum_frame(t: float, seed: int = 0) -> SpectrumFrame:
 
 
 COFFEE = np.array([[92, 58, 38], [201, 170, 130], [30, 28, 26], [240, 236, 226]], dtype=np.uint8)
-COFFEE_TRAINED = np.array([[98, 60, 40], [196, 166, 128], [34, 30, 28], [236, 232, 222]], dtype=np.uint8)
+COFFEE_TRAINED = np.array(
+    [[98, 60, 40], [196, 166, 128], [34, 30, 28], [236, 232, 222]], dtype=np.uint8
+)
 
 
 def demo_script() -> list[Any]:
@@ -63,7 +65,15 @@ def demo_script() -> list[Any]:
         FusionState(44.0, "confirming", "CoffeeScene", 26.0, 1),
         FusionState(48.0, "confirming", "CoffeeScene", 22.0, 2),
         Decision(48.0, "CoffeeScene", 87.5, "CoffeeScene detected", 91.2, 83.8),
-        ArmState(48.0, True, False, "maestro", "/dev/pts/3", dict(JOINTS), {"shoulder": 30.0, "elbow": 100.0, "wrist": 90.0}),
+        ArmState(
+            48.0,
+            True,
+            False,
+            "maestro",
+            "/dev/pts/3",
+            dict(JOINTS),
+            {"shoulder": 30.0, "elbow": 100.0, "wrist": 90.0},
+        ),
         AcousticPrediction(53.0, "CoffeeScene", 88.0, {"CoffeeScene": 0.85}),
         FusionState(53.0, "looking", "CoffeeScene", 30.0, 0),
         FusionState(60.5, "looking", "CoffeeScene", 22.5, 1),
@@ -74,7 +84,9 @@ def demo_script() -> list[Any]:
 class ReplayEngine:
     """Emits `script` on `start()`, in order, from the calling thread; records what it is asked."""
 
-    def __init__(self, script: list[Any] | None = None, *, window_source: np.ndarray | None = None) -> None:
+    def __init__(
+        self, script: list[Any] | None = None, *, window_source: np.ndarray | None = None
+    ) -> None:
         self.script = demo_script() if script is None else script
         self.callbacks: list[Callable[[Any], None]] = []
         self.started = threading.Event()
@@ -111,7 +123,11 @@ class ReplayEngine:
             raise ServantError("servo: not connected; check the serial port in Settings")
         self.armed = armed
         state = self._arm
-        self.emit(ArmState(self.t, True, armed, state.protocol, state.port, dict(state.angles), state.target))
+        self.emit(
+            ArmState(
+                self.t, True, armed, state.protocol, state.port, dict(state.angles), state.target
+            )
+        )
 
     def arm(self) -> None:
         self._set_armed(True)

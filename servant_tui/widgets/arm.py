@@ -46,7 +46,11 @@ class ArmPane(Static):
         )
         table.add_row("link", link, "")
         table.add_row("protocol", Text(state.protocol or "–", "grey70"), "")
-        armed = Text(" ARMED ", "bold white on red") if state.armed else Text(" disarmed ", "black on grey70")
+        armed = (
+            Text(" ARMED ", "bold white on red")
+            if state.armed
+            else Text(" disarmed ", "black on grey70")
+        )
         table.add_row("state", armed, "")
         bar_width = max(self.size.width - 22, 0)
         for joint, angle in state.angles.items():

@@ -52,7 +52,10 @@ class ScenePane(Static):
                 table.add_row(name, Text("–", "grey50"))
             else:
                 scene = prediction.scene or "unknown place"
-                table.add_row(name, Text.assemble((f"{scene:<13}", "cyan"), percent(prediction.confidence), " %"))
+                table.add_row(
+                    name,
+                    Text.assemble((f"{scene:<13}", "cyan"), percent(prediction.confidence), " %"),
+                )
         table.add_row("fusion", self._fusion_text())
         table.add_row("window", self._window_text())
         pictures = self.fusion.pictures_taken if self.fusion else 0
@@ -63,7 +66,7 @@ class ScenePane(Static):
         else:
             style = "bold green" if last.scene else "yellow"
             table.add_row("decided", Text(last.line, style))
-            table.add_row("", f"averaged confidence {last.confidence:.1f} %")
+            table.add_row("", f"average {last.confidence:.1f} %")
         for decision in list(self.decisions)[1:]:
             table.add_row(
                 Text(clock(decision.t), "grey50"),
@@ -85,4 +88,4 @@ class ScenePane(Static):
         if state is None or state.seconds_left is None:
             return Text("closed", "grey50")
         fraction = state.seconds_left / self.confirm_window_s if self.confirm_window_s else 0.0
-        return Text.assemble(bar(fraction, 10, "magenta"), f" {state.seconds_left:4.1f} s left")
+        return Text.assemble(bar(fraction, 10, "magenta"), f" {state.seconds_left:4.1f} s")
