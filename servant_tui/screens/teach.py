@@ -318,7 +318,7 @@ class TeachScreen(Screen[None]):
 
         try:
             records = load_records()
-            learner = ActionLearner()
+            learner = ActionLearner(report_every=100)  # enough points for a curve
             total = learner.max_iter
 
             def report(iterations: int, error: float) -> None:
