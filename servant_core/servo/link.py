@@ -53,6 +53,19 @@ def open_serial(port: str, baudrate: int) -> serial.Serial:
         raise ServantError(f"{port}: {reason}") from exc
 
 
+class ManualClock:
+    """A clock that only moves when slept on: dry runs finish at once, tests step time exactly."""
+
+    def __init__(self, start: float = 0.0) -> None:
+        self.now = start
+
+    def __call__(self) -> float:
+        return self.now
+
+    def sleep(self, seconds: float) -> None:
+        self.now += max(0.0, seconds)
+
+
 class ServoLink:
     """An arm on a servo controller. Build it with `ServoLink.open(...)`.
 
