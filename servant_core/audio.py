@@ -51,7 +51,9 @@ def window_length(rate: int, seconds: float) -> int:
     return int(round(rate * seconds))
 
 
-def cut_windows(signal: np.ndarray, rate: int, seconds: float = DEFAULT_WINDOW_SECONDS) -> np.ndarray:
+def cut_windows(
+    signal: np.ndarray, rate: int, seconds: float = DEFAULT_WINDOW_SECONDS
+) -> np.ndarray:
     """Cut a mono signal into consecutive non-overlapping windows; the remainder is dropped.
 
     Returns a (n_windows, samples_per_window) view-free float32 array (possibly with 0 rows).

@@ -13,7 +13,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from servant_core.audio import AUDIO_SUFFIXES, DEFAULT_RATE, DEFAULT_WINDOW_SECONDS, cut_windows, read_audio
+from servant_core.audio import (
+    AUDIO_SUFFIXES,
+    DEFAULT_RATE,
+    DEFAULT_WINDOW_SECONDS,
+    cut_windows,
+    read_audio,
+)
 from servant_core.errors import ServantError
 
 PICTURE_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -47,7 +53,9 @@ class SceneLibrary:
         scenes: list[str] = []
         recordings: list[Recording] = []
         pictures: list[Picture] = []
-        for scene_dir in sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")):
+        for scene_dir in sorted(
+            p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")
+        ):
             scenes.append(scene_dir.name)
             for path in sorted(scene_dir.rglob("*")):
                 if path.name.startswith(".") or not path.is_file():

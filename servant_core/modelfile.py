@@ -43,7 +43,9 @@ def load_model(path: str | Path) -> dict[str, Recogniser]:
     """Load a model file written by `save_model`; anything else is refused in one clear line."""
     path = Path(path)
     if not path.is_file():
-        raise ServantError(f"{path}: no such model file; train one with `servant train ROOT -o {path}`")
+        raise ServantError(
+            f"{path}: no such model file; train one with `servant train ROOT -o {path}`"
+        )
     try:
         with np.load(path, allow_pickle=False) as npz:
             files = {name: npz[name] for name in npz.files}
@@ -76,5 +78,7 @@ def load_model(path: str | Path) -> dict[str, Recogniser]:
             parts = {k[len(prefix) :]: v for k, v in files.items() if k.startswith(prefix)}
             recognisers[role] = methods[state["method"]].from_state(state, parts)
     except (KeyError, ValueError, TypeError) as exc:
-        raise ServantError(f"{path}: damaged Servant model file ({exc!r}); retrain the model") from exc
+        raise ServantError(
+            f"{path}: damaged Servant model file ({exc!r}); retrain the model"
+        ) from exc
     return recognisers

@@ -17,9 +17,7 @@ from typing import Any
 
 from servant_core.errors import ServantError
 
-SUBCOMMAND_MODULES = (
-    "servant_core.cli.recognition",
-)
+SUBCOMMAND_MODULES = ("servant_core.cli.recognition",)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -59,7 +59,9 @@ class ClusterLabels:
     def warnings(self) -> list[str]:
         lines = [f"cluster {c} has no majority scene (tie)" for c in self.tied_clusters]
         lines += [f"cluster {c} has no training member" for c in self.empty_clusters]
-        lines += [f"scene {s!r} owns no cluster: it can never be predicted" for s in self.unowned_scenes]
+        lines += [
+            f"scene {s!r} owns no cluster: it can never be predicted" for s in self.unowned_scenes
+        ]
         return lines
 
 

@@ -17,8 +17,8 @@ from sklearn.exceptions import NotFittedError
 from sklearn.metrics.pairwise import euclidean_distances
 
 from servant_core.audio import DEFAULT_RATE, DEFAULT_WINDOW_SECONDS
-from servant_core.features.paper_fft import paper_fft_vectors
 from servant_core.features.palette import DEFAULT_COLOURS, dominant_colours
+from servant_core.features.paper_fft import paper_fft_vectors
 from servant_core.recognisers.base import (
     UNKNOWN,
     ClusterLabels,
@@ -159,9 +159,15 @@ class PaperVisualRecogniser(KMeansSceneRecogniser):
     def matched_palette(self, X: np.ndarray) -> np.ndarray:
         """The training palette (nearest centroid as k RGB colours) each row matched."""
         cluster, _ = self.nearest(X)
-        return np.clip(np.rint(self.centres_[cluster]), 0, 255).astype(np.uint8).reshape(
-            len(cluster), self.n_colours, 3
+        return (
+            np.clip(np.rint(self.centres_[cluster]), 0, 255)
+            .astype(np.uint8)
+            .reshape(len(cluster), self.n_colours, 3)
         )
 
     def params(self) -> dict[str, Any]:
-        return {"n_colours": self.n_colours, "random_state": self.random_state, "n_init": self.n_init}
+        return {
+            "n_colours": self.n_colours,
+            "random_state": self.random_state,
+            "n_init": self.n_init,
+        }

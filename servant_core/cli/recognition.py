@@ -1,0 +1,313 @@
+"""`servant train | predict | eval | table`: the paper's recognition pipeline, headless."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from servant_core.audio import DEFAULT_RATE, DEFAULT_WINDOW_SECONDS, cut_windows, read_audio
+from servant_core.cli import emit
+from servant_core.errors import ServantError
+from servant_core.evaluate import (
+    IMAGE_TRAIN_FRACTION,
+    evaluate_audio,
+    evaluate_fusion,
+    evaluate_image,
+    format_tables,
+    paper_tables,
+    run_fusion,
+)
+from servant_core.fusion import POLICIES, FusionConfig
+from servant_core.library import SceneLibrary, featurize_recordings, read_picture, read_pictures
+from servant_core.modelfile import load_model, save_model
+from servant_core.recognisers import ACOUSTIC_METHODS, VISUAL_METHODS, Recogniser, make_recogniser
+from servant_core.storage import data_dir
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    train = subparsers.add_parser("train", help="train the recognisers on a scene library")
+    train.add_argument("root", type=Path, help="scene library: ROOT/<scene>/<recordings, pictures>")
+    train.add_argument("-o", "--output", type=Path, help="model file (default: the user data dir)")
+    _method_options(train)
+    _audio_options(train)
+    train.add_argument(
+        "--skip-bad", action="store_true", help="skip unreadable files (warn) instead of stopping"
+    )
+    train.add_argument("--json", action="store_true")
+    train.set_defaults(handler=cmd_train)
+
+    predict = subparsers.add_parser(
+        "predict", help="recognise a recording and/or pictures with a model"
+    )
+    predict.add_argument("model", type=Path)
+    predict.add_argument("--audio", type=Path, help="a recording: each window is recognised")
+    predict.add_argument("--image", type=Path, nargs="+", default=[], help="pictures, in order")
+    _fusion_options(predict)
+    predict.add_argument("--json", action="store_true")
+    predict.set_defaults(handler=cmd_predict)
+
+    evaluate = subparsers.add_parser("eval", help="evaluate a method on a scene library")
+    senses = evaluate.add_subparsers(dest="sense", metavar="SENSE", required=True)
+    audio = senses.add_parser("audio", help="acoustic recognition: temporal or recording protocol")
+    audio.add_argument("root", type=Path)
+    audio.add_argument("--protocol", choices=["temporal", "recording"], default="temporal")
+    audio.add_argument("--method", choices=sorted(ACOUSTIC_METHODS), default="paper")
+    audio.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
+    _audio_options(audio)
+    audio.add_argument("--json", action="store_true")
+    audio.set_defaults(handler=cmd_eval_audio)
+    image = senses.add_parser("image", help="visual recognition: train library vs test library")
+    image.add_argument("root", type=Path, help="training pictures")
+    image.add_argument(
+        "--test", type=Path, help="test pictures (default: split ROOT by file order)"
+    )
+    image.add_argument(
+        "--split",
+        type=float,
+        default=IMAGE_TRAIN_FRACTION,
+        help="without --test: fraction of each scene's files (by name) that train",
+    )
+    image.add_argument("--method", choices=sorted(VISUAL_METHODS), default="paper")
+    image.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
+    image.add_argument("--json", action="store_true")
+    image.set_defaults(handler=cmd_eval_image)
+    fusion = senses.add_parser("fusion", help="fused decisions over paired windows and pictures")
+    fusion.add_argument("root", type=Path, help="library with recordings and pictures per scene")
+    fusion.add_argument("--audio-method", choices=sorted(ACOUSTIC_METHODS), default="paper")
+    fusion.add_argument("--image-method", choices=sorted(VISUAL_METHODS), default="paper")
+    fusion.add_argument("--scenes", help="comma-separated scenes to keep (default: all paired)")
+    _fusion_options(fusion)
+    fusion.add_argument("--json", action="store_true")
+    fusion.set_defaults(handler=cmd_eval_fusion)
+
+    table = subparsers.add_parser("table", help="the paper's Table I and Table II for a library")
+    table.add_argument("library", type=Path)
+    table.add_argument("--test", type=Path, help="take the test recording and picture from here")
+    table.add_argument(
+        "--scenes", help="comma-separated scenes (default: all with sound and pictures)"
+    )
+    _method_options(table)
+    table.add_argument("--json", action="store_true")
+    table.set_defaults(handler=cmd_table)
+
+
+def _method_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--audio-method", choices=sorted(ACOUSTIC_METHODS), default="paper")
+    parser.add_argument("--image-method", choices=sorted(VISUAL_METHODS), default="paper")
+
+
+def _audio_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--rate", type=int, default=DEFAULT_RATE, help="model sample rate (Hz)")
+    parser.add_argument(
+        "--window", type=float, default=DEFAULT_WINDOW_SECONDS, help="window length (s)"
+    )
+
+
+def _fusion_options(parser: argparse.ArgumentParser) -> None:
+    defaults = FusionConfig()
+    parser.add_argument("--policy", choices=sorted(POLICIES), default="sequential")
+    parser.add_argument("--acoustic-window", type=float, default=defaults.acoustic_window_s)
+    parser.add_argument("--confirm-window", type=float, default=defaults.confirm_window_s)
+    parser.add_argument("--pictures", type=int, default=defaults.pictures_needed)
+
+
+def _fusion_config(args: argparse.Namespace) -> FusionConfig:
+    if args.pictures < 1:
+        raise ServantError("--pictures must be at least 1")
+    return FusionConfig(args.acoustic_window, args.confirm_window, args.pictures)
+
+
+def _warn(error: ServantError) -> None:
+    print(f"servant: warning: skipped {error}", file=sys.stderr)
+
+
+def _library(root: Path, scenes: str | None) -> SceneLibrary:
+    library = SceneLibrary.scan(root)
+    return (
+        library.restricted([s.strip() for s in scenes.split(",") if s.strip()])
+        if scenes
+        else library
+    )
+
+
+def _audio_params(args: argparse.Namespace) -> dict[str, Any]:
+    return {"rate": args.rate, "window_seconds": args.window}
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    library = SceneLibrary.scan(args.root)
+    on_error = _warn if args.skip_bad else None
+    recognisers: dict[str, Recogniser] = {}
+    summary: dict[str, Any] = {"root": str(args.root), "warnings": []}
+    if len({r.scene for r in library.recordings}) >= 2:
+        audio = make_recogniser("audio", args.audio_method, **_audio_params(args))
+        wf = featurize_recordings(
+            library.recordings, audio.featurize, args.rate, args.window, on_error
+        )
+        audio.fit(wf.features, wf.scenes)
+        recognisers["acoustic"] = audio
+        summary["acoustic"] = {
+            "method": args.audio_method,
+            "scenes": audio.scenes_,
+            "n_windows": len(wf.scenes),
+        }
+        summary["warnings"] += getattr(getattr(audio, "labels_", None), "warnings", list)()
+    if len({p.scene for p in library.pictures}) >= 2:
+        visual = make_recogniser("image", args.image_method)
+        images, kept = read_pictures(library.pictures, on_error)
+        visual.fit(visual.featurize(images), [p.scene for p in kept])
+        recognisers["visual"] = visual
+        summary["visual"] = {
+            "method": args.image_method,
+            "scenes": visual.scenes_,
+            "n_pictures": len(kept),
+        }
+        summary["warnings"] += getattr(getattr(visual, "labels_", None), "warnings", list)()
+    if not recognisers:
+        raise ServantError(
+            f"{args.root}: training needs at least two scene folders with recordings or pictures"
+        )
+    output = args.output or data_dir() / "models" / "model.npz"
+    save_model(output, recognisers)
+    summary["model"] = str(output)
+    lines = [f"model written to {output}"]
+    for role in ("acoustic", "visual"):
+        if role in summary:
+            s = summary[role]
+            count = s.get("n_windows", s.get("n_pictures"))
+            unit = "windows" if "n_windows" in s else "pictures"
+            lines.append(
+                f"{role}: {s['method']} on {count} {unit}, scenes {', '.join(s['scenes'])}"
+            )
+    lines += [f"warning: {w}" for w in summary["warnings"]]
+    emit(args, summary, "\n".join(lines))
+    return 0
+
+
+def cmd_predict(args: argparse.Namespace) -> int:
+    if args.audio is None and not args.image:
+        raise ServantError("give --audio FILE and/or --image FILE...")
+    model = load_model(args.model)
+    result: dict[str, Any] = {}
+    lines: list[str] = []
+    first_acoustic: tuple[str, float] | None = None
+    if args.audio is not None:
+        audio = _role(model, "acoustic", args.model)
+        rate, seconds = audio.rate, audio.window_seconds  # type: ignore[attr-defined]
+        windows = cut_windows(read_audio(args.audio, rate), rate, seconds)
+        if len(windows) == 0:
+            raise ServantError(
+                f"{args.audio}: shorter than one {seconds:g} s window; record longer"
+            )
+        X = audio.featurize(windows)
+        scenes, confidences = audio.predict(X), audio.confidence(X)
+        result["acoustic"] = [
+            {"window": i, "scene": str(s), "confidence": float(c)}
+            for i, (s, c) in enumerate(zip(scenes, confidences, strict=True))
+        ]
+        lines += [
+            f"Acoustic window {i}: {s} (confidence {c:.3f})"
+            for i, (s, c) in enumerate(zip(scenes, confidences, strict=True))
+        ]
+        first_acoustic = (str(scenes[0]), float(confidences[0]))
+    visual_predictions: list[tuple[str, float]] = []
+    if args.image:
+        visual = _role(model, "visual", args.model)
+        X = visual.featurize([read_picture(p) for p in args.image])
+        scenes, confidences = visual.predict(X), visual.confidence(X)
+        visual_predictions = [(str(s), float(c)) for s, c in zip(scenes, confidences, strict=True)]
+        result["visual"] = [
+            {"picture": str(p), "scene": s, "confidence": c}
+            for p, (s, c) in zip(args.image, visual_predictions, strict=True)
+        ]
+        lines += [
+            f"Visual {p.name}: {s} (confidence {c:.3f})"
+            for p, (s, c) in zip(args.image, visual_predictions, strict=True)
+        ]
+    if first_acoustic is not None and visual_predictions:
+        decision = run_fusion(args.policy, _fusion_config(args), first_acoustic, visual_predictions)
+        result["decision"] = {
+            "scene": decision.scene,
+            "line": decision.line,
+            "confidence": decision.confidence,
+        }
+        lines.append(f"{decision.line} (average confidence {decision.confidence:.3f})")
+    emit(args, result, "\n".join(lines))
+    return 0
+
+
+def _role(model: dict[str, Recogniser], role: str, path: Path) -> Recogniser:
+    if role not in model:
+        raise ServantError(
+            f"{path}: this model has no {role} recogniser (train it with two scenes or more)"
+        )
+    return model[role]
+
+
+def _format_scores(result: dict[str, Any]) -> str:
+    lines = [
+        f"{result['sense']} method={result['method']} protocol={result['protocol']} n_test={result['n_test']}",
+        f"accuracy           {result['accuracy']:.3f}",
+        f"balanced accuracy  {result['balanced_accuracy']:.3f}",
+        f"log loss           {result['log_loss']:.3f}",
+        f"unknown rate       {result['unknown_rate']:.3f}",
+        "recall per scene:",
+    ]
+    lines += [f"  {scene:<14} {recall:.3f}" for scene, recall in result["per_class"].items()]
+    lines += [f"skipped fold: {s}" for s in result.get("skipped_folds", [])]
+    return "\n".join(lines)
+
+
+def cmd_eval_audio(args: argparse.Namespace) -> int:
+    result = evaluate_audio(
+        _library(args.root, args.scenes), args.method, args.protocol, _audio_params(args), _warn
+    )
+    emit(args, result, _format_scores(result))
+    return 0
+
+
+def cmd_eval_image(args: argparse.Namespace) -> int:
+    if not 0.0 < args.split < 1.0:
+        raise ServantError("--split must be between 0 and 1")
+    test = _library(args.test, args.scenes) if args.test else None
+    result = evaluate_image(
+        _library(args.root, args.scenes), test, args.method, args.split, on_error=_warn
+    )
+    emit(args, result, _format_scores(result))
+    return 0
+
+
+def cmd_eval_fusion(args: argparse.Namespace) -> int:
+    result = evaluate_fusion(
+        _library(args.root, args.scenes),
+        args.audio_method,
+        args.image_method,
+        args.policy,
+        _fusion_config(args),
+        _warn,
+    )
+    text = (
+        f"fusion policy={result['policy']} methods={result['method']} scenes={','.join(result['scenes'])}\n"
+        f"windows {result['n_test']}  decided {result['decision_rate']:.3f}  "
+        f"right when decided {result['precision']:.3f}  accuracy {result['accuracy']:.3f}"
+    )
+    emit(args, result, text)
+    return 0
+
+
+def cmd_table(args: argparse.Namespace) -> int:
+    test = _library(args.test, args.scenes) if args.test else None
+    tables = paper_tables(
+        _library(args.library, args.scenes),
+        test,
+        args.audio_method,
+        args.image_method,
+        on_error=_warn,
+    )
+    emit(args, tables, format_tables(tables))
+    return 0
+
+
+__all__ = ["register"]

@@ -1,0 +1,420 @@
+"""Evaluation protocols (DESIGN.md) and the paper's tables.
+
+Audio: `temporal` — the first 60 % of each recording's windows train, the rest test;
+`recording` — leave one recording out, train on the rest, pool the predictions.
+Images: a train library and a test library, or one library split by file order per scene.
+Fusion: test windows paired with test pictures of the same scene, run through a fusion policy.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from sklearn.metrics import confusion_matrix
+
+from servant_core.errors import ServantError
+from servant_core.fusion import POLICIES, FusionConfig
+from servant_core.library import (
+    Picture,
+    SceneLibrary,
+    WindowFeatures,
+    featurize_recordings,
+    iter_recording_windows,
+    read_pictures,
+)
+from servant_core.recognisers import UNKNOWN, Recogniser, make_recogniser
+
+PROTOCOLS = ("temporal", "recording")
+TRAIN_FRACTION = 0.6
+IMAGE_TRAIN_FRACTION = 0.7
+LOG_EPS = 1e-15
+
+
+def temporal_split(
+    recording: np.ndarray, position: np.ndarray, fraction: float = TRAIN_FRACTION
+) -> np.ndarray:
+    """Boolean train mask: the first `fraction` of each recording's windows (at least one of
+    each side when the recording has two windows or more)."""
+    train = np.zeros(len(position), dtype=bool)
+    for r in np.unique(recording):
+        rows = recording == r
+        n = int(rows.sum())
+        n_train = min(max(int(math.floor(fraction * n)), 1), max(n - 1, 1))
+        train[rows] = position[rows] < n_train
+    return train
+
+
+def file_order_split(
+    pictures: Sequence[Picture], fraction: float = IMAGE_TRAIN_FRACTION
+) -> np.ndarray:
+    """Boolean train mask over pictures: the first `fraction` of each scene's files by name."""
+    train = np.zeros(len(pictures), dtype=bool)
+    by_scene: dict[str, list[int]] = {}
+    for i, picture in enumerate(pictures):
+        by_scene.setdefault(picture.scene, []).append(i)
+    for indices in by_scene.values():
+        indices.sort(key=lambda i: pictures[i].path.name)
+        n_train = min(max(int(math.floor(fraction * len(indices))), 1), max(len(indices) - 1, 1))
+        train[indices[:n_train]] = True
+    return train
+
+
+@dataclass
+class Predictions:
+    """Pooled test predictions: true scene, predicted scene, probability given to the truth."""
+
+    truth: list[str]
+    predicted: list[str]
+    p_truth: list[float]
+
+    def extend(self, model: Recogniser, X: np.ndarray, truth: Sequence[str]) -> None:
+        predicted = model.predict(X)
+        proba = model.predict_proba(X)
+        column = {s: j for j, s in enumerate(model.scenes_)}
+        for i, scene in enumerate(truth):
+            self.truth.append(str(scene))
+            self.predicted.append(str(predicted[i]))
+            j = column.get(str(scene))
+            self.p_truth.append(float(proba[i, j]) if j is not None else 0.0)
+
+
+def scores(preds: Predictions, scenes: Sequence[str]) -> dict[str, Any]:
+    """accuracy, balanced accuracy, per-scene recall, log loss, unknown rate, confusion matrix."""
+    truth = np.array(preds.truth)
+    predicted = np.array(preds.predicted)
+    if len(truth) == 0:
+        raise ServantError("nothing to evaluate: no test window or picture")
+    present = [s for s in scenes if s in set(truth.tolist())]
+    # balanced accuracy = mean recall over the scenes that occur in the test set
+    recall = {s: float(np.mean(predicted[truth == s] == s)) for s in present}
+    labels = [*scenes, UNKNOWN]
+    p = np.clip(np.array(preds.p_truth), LOG_EPS, 1.0)
+    return {
+        "accuracy": float(np.mean(truth == predicted)),
+        "balanced_accuracy": float(np.mean(list(recall.values()))),
+        "per_class": recall,
+        "log_loss": float(-np.mean(np.log(p))),
+        "unknown_rate": float(np.mean(predicted == UNKNOWN)),
+        "n_test": int(len(truth)),
+        "confusion": {
+            "labels": labels,
+            "matrix": confusion_matrix(truth, predicted, labels=labels).tolist(),
+        },
+    }
+
+
+def featurize_library_audio(
+    library: SceneLibrary, model: Recogniser, on_error: Callable[[ServantError], None] | None = None
+) -> WindowFeatures:
+    return featurize_recordings(
+        library.recordings,
+        model.featurize,
+        model.rate,
+        model.window_seconds,
+        on_error,  # type: ignore[attr-defined]
+    )
+
+
+def evaluate_audio(
+    library: SceneLibrary,
+    method: str = "paper",
+    protocol: str = "temporal",
+    params: dict[str, Any] | None = None,
+    on_error: Callable[[ServantError], None] | None = None,
+) -> dict[str, Any]:
+    if protocol not in PROTOCOLS:
+        raise ServantError(f"unknown protocol {protocol!r}; choose temporal or recording")
+    params = params or {}
+    probe = make_recogniser("audio", method, **params)
+    wf = featurize_library_audio(library, probe, on_error)
+    preds = Predictions([], [], [])
+    skipped: list[str] = []
+    if protocol == "temporal":
+        train = temporal_split(wf.recording, wf.position)
+        model = make_recogniser("audio", method, **params).fit(wf.features[train], wf.scenes[train])
+        preds.extend(model, wf.features[~train], wf.scenes[~train])
+        n_train = int(train.sum())
+    else:
+        n_train = 0
+        for r in np.unique(wf.recording):
+            test = wf.recording == r
+            try:
+                model = make_recogniser("audio", method, **params).fit(
+                    wf.features[~test], wf.scenes[~test]
+                )
+            except ServantError as error:
+                skipped.append(f"{wf.recordings[r].path.name}: {error}")
+                continue
+            preds.extend(model, wf.features[test], wf.scenes[test])
+            n_train += int((~test).sum())
+    result = scores(preds, sorted(set(wf.scenes.tolist())))
+    result.update(
+        method=method,
+        protocol=protocol,
+        sense="audio",
+        n_train=n_train,
+        n_recordings=len(np.unique(wf.recording)),
+        skipped_folds=skipped,
+    )
+    return result
+
+
+def _pictures_and_features(
+    model: Recogniser, pictures: Sequence[Picture], on_error: Callable[[ServantError], None] | None
+) -> tuple[np.ndarray, list[Picture]]:
+    images, kept = read_pictures(pictures, on_error)
+    if not kept:
+        raise ServantError("no readable picture")
+    return model.featurize(images), kept
+
+
+def evaluate_image(
+    train_library: SceneLibrary,
+    test_library: SceneLibrary | None = None,
+    method: str = "paper",
+    split: float = IMAGE_TRAIN_FRACTION,
+    params: dict[str, Any] | None = None,
+    on_error: Callable[[ServantError], None] | None = None,
+) -> dict[str, Any]:
+    """Train on `train_library`'s pictures and test on `test_library`'s; with no test library,
+    split each scene's pictures by file order (the first `split` train)."""
+    params = params or {}
+    model = make_recogniser("image", method, **params)
+    if test_library is None:
+        X, kept = _pictures_and_features(model, train_library.pictures, on_error)
+        train = file_order_split(kept, split)
+        X_train, y_train = X[train], [p.scene for p, t in zip(kept, train, strict=True) if t]
+        X_test, y_test = X[~train], [p.scene for p, t in zip(kept, train, strict=True) if not t]
+        protocol = f"file-order-{split:g}"
+    else:
+        X_train, kept_train = _pictures_and_features(model, train_library.pictures, on_error)
+        X_test, kept_test = _pictures_and_features(model, test_library.pictures, on_error)
+        y_train = [p.scene for p in kept_train]
+        y_test = [p.scene for p in kept_test]
+        protocol = "train-test"
+    model.fit(X_train, y_train)
+    preds = Predictions([], [], [])
+    preds.extend(model, X_test, y_test)
+    result = scores(preds, sorted(set(y_train) | set(y_test)))
+    result.update(method=method, protocol=protocol, sense="image", n_train=len(y_train))
+    return result
+
+
+def run_fusion(
+    policy_name: str,
+    config: FusionConfig,
+    acoustic: tuple[str, float],
+    visual: Sequence[tuple[str, float]],
+) -> Any:
+    """One scene encounter in simulated time: the acoustic prediction at t=0, then pictures as
+    the policy asks for them (cycling through `visual`), until a decision. Returns the Decision."""
+    policy = POLICIES[policy_name](config)
+    t = 0.0
+    step = config.picture_interval_s / 4
+    events = policy.on_acoustic(acoustic[0], acoustic[1], t)
+    shown = 0
+    horizon = config.acoustic_window_s + config.picture_interval_s + 5 * step
+    while t <= horizon:
+        for event in events:
+            if hasattr(event, "line"):
+                return event
+        t = round(t + step, 9)
+        events = policy.tick(t)
+        if not events and policy.wants_picture(t):
+            scene, confidence = visual[shown % len(visual)]
+            shown += 1
+            events = policy.on_visual(scene, confidence, t)
+    raise RuntimeError(f"fusion policy {policy_name!r} made no decision within its window")
+
+
+def evaluate_fusion(
+    library: SceneLibrary,
+    acoustic_method: str = "paper",
+    visual_method: str = "paper",
+    policy: str = "sequential",
+    config: FusionConfig | None = None,
+    on_error: Callable[[ServantError], None] | None = None,
+) -> dict[str, Any]:
+    """Each test window (temporal split) of a scene that also has pictures is paired with that
+    scene's test pictures (file-order split), in turn; the policy decides or not. Reports how
+    often it decides and, when it names a scene, how often it is right."""
+    if policy not in POLICIES:
+        raise ServantError(
+            f"unknown fusion policy {policy!r}; choose {', '.join(sorted(POLICIES))}"
+        )
+    config = config or FusionConfig()
+    paired = sorted({r.scene for r in library.recordings} & {p.scene for p in library.pictures})
+    if len(paired) < 2:
+        raise ServantError(
+            f"{library.root}: fusion needs at least two scenes with both recordings and pictures"
+        )
+    library = library.restricted(paired)
+    audio = make_recogniser("audio", acoustic_method)
+    wf = featurize_library_audio(library, audio, on_error)
+    train = temporal_split(wf.recording, wf.position)
+    audio.fit(wf.features[train], wf.scenes[train])
+    a_scene = audio.predict(wf.features[~train])
+    a_conf = audio.confidence(wf.features[~train])
+
+    visual = make_recogniser("image", visual_method)
+    X, kept = _pictures_and_features(visual, library.pictures, on_error)
+    p_train = file_order_split(kept, IMAGE_TRAIN_FRACTION)
+    visual.fit(X[p_train], [p.scene for p, t in zip(kept, p_train, strict=True) if t])
+    test_pics = [i for i, t in enumerate(p_train) if not t]
+    v_scene = visual.predict(X[test_pics])
+    v_conf = visual.confidence(X[test_pics])
+    by_scene: dict[str, list[tuple[str, float]]] = {}
+    for k, i in enumerate(test_pics):
+        by_scene.setdefault(kept[i].scene, []).append((str(v_scene[k]), float(v_conf[k])))
+
+    truth = wf.scenes[~train]
+    decided = right = 0
+    cursor = dict.fromkeys(by_scene, 0)
+    for i, scene in enumerate(truth):
+        pics = by_scene[scene]
+        start = cursor[scene]
+        shown = [pics[(start + j) % len(pics)] for j in range(len(pics))]
+        cursor[scene] = (start + config.pictures_needed) % len(pics)
+        decision = run_fusion(policy, config, (str(a_scene[i]), float(a_conf[i])), shown)
+        if decision.scene is not None:
+            decided += 1
+            right += decision.scene == scene
+    n = len(truth)
+    return {
+        "method": f"{acoustic_method}+{visual_method}",
+        "acoustic_method": acoustic_method,
+        "visual_method": visual_method,
+        "policy": policy,
+        "protocol": "temporal+file-order",
+        "scenes": paired,
+        "n_test": n,
+        "decision_rate": decided / n if n else 0.0,
+        "precision": right / decided if decided else 0.0,
+        "accuracy": right / n if n else 0.0,
+    }
+
+
+def _first_test_items(
+    library: SceneLibrary,
+    test_library: SceneLibrary | None,
+    scenes: Sequence[str],
+    rate: int,
+    seconds: float,
+) -> tuple[dict[str, np.ndarray], dict[str, Picture]]:
+    """One test window and one test picture per scene. Without a test library they are held out
+    of `library`: a window after the temporal split point, a picture after the file-order split."""
+    windows: dict[str, np.ndarray] = {}
+    pictures: dict[str, Picture] = {}
+    source = test_library if test_library is not None else library
+    for scene in scenes:
+        recs = [r for r in source.recordings if r.scene == scene]
+        for _, _, w in iter_recording_windows(recs[:1], rate, seconds):
+            index = (
+                0
+                if test_library is not None
+                else min(max(int(math.floor(TRAIN_FRACTION * len(w))), 1), len(w) - 1)
+            )
+            windows[scene] = w[index : index + 1]
+        pics = sorted((p for p in source.pictures if p.scene == scene), key=lambda p: p.path.name)
+        index = (
+            0
+            if test_library is not None
+            else min(max(int(math.floor(IMAGE_TRAIN_FRACTION * len(pics))), 1), len(pics) - 1)
+        )
+        pictures[scene] = pics[index]
+    return windows, pictures
+
+
+def paper_tables(
+    library: SceneLibrary,
+    test_library: SceneLibrary | None = None,
+    acoustic_method: str = "paper",
+    visual_method: str = "paper",
+    config: FusionConfig | None = None,
+    on_error: Callable[[ServantError], None] | None = None,
+) -> dict[str, Any]:
+    """The paper's Table I (terminal line per picture × recording) and Table II (average
+    confidence per cell, 0.000 where no scene), for every scene with recordings and pictures."""
+    config = config or FusionConfig()
+    paired = sorted({r.scene for r in library.recordings} & {p.scene for p in library.pictures})
+    if test_library is not None:
+        paired = [
+            s
+            for s in paired
+            if any(r.scene == s for r in test_library.recordings)
+            and any(p.scene == s for p in test_library.pictures)
+        ]
+    if len(paired) < 2:
+        raise ServantError(
+            f"{library.root}: the tables need at least two scenes with both recordings and pictures"
+        )
+    library = library.restricted(paired)
+    audio = make_recogniser("audio", acoustic_method)
+    wf = featurize_library_audio(library, audio, on_error)
+    train = (
+        temporal_split(wf.recording, wf.position)
+        if test_library is None
+        else np.ones(len(wf.scenes), bool)
+    )
+    audio.fit(wf.features[train], wf.scenes[train])
+    visual = make_recogniser("image", visual_method)
+    X, kept = _pictures_and_features(visual, library.pictures, on_error)
+    p_train = (
+        file_order_split(kept, IMAGE_TRAIN_FRACTION)
+        if test_library is None
+        else np.ones(len(kept), bool)
+    )
+    visual.fit(X[p_train], [p.scene for p, t in zip(kept, p_train, strict=True) if t])
+
+    windows, pictures = _first_test_items(
+        library,
+        test_library,
+        paired,
+        audio.rate,
+        audio.window_seconds,  # type: ignore[attr-defined]
+    )
+    cells: dict[str, dict[str, dict[str, Any]]] = {}
+    for picture_scene in paired:
+        images, _ = read_pictures([pictures[picture_scene]])
+        Xv = visual.featurize(images)
+        v = (str(visual.predict(Xv)[0]), float(visual.confidence(Xv)[0]))
+        cells[picture_scene] = {}
+        for recording_scene in paired:
+            Xa = audio.featurize(windows[recording_scene])
+            a = (str(audio.predict(Xa)[0]), float(audio.confidence(Xa)[0]))
+            decision = run_fusion("sequential", config, a, [v])
+            cells[picture_scene][recording_scene] = {
+                "line": decision.line,
+                "confidence": decision.confidence,
+                "acoustic": {"scene": a[0], "confidence": a[1]},
+                "visual": {"scene": v[0], "confidence": v[1]},
+            }
+    return {
+        "scenes": paired,
+        "acoustic_method": acoustic_method,
+        "visual_method": visual_method,
+        "pictures": {s: str(p.path) for s, p in pictures.items()},
+        "cells": cells,
+    }
+
+
+def format_tables(tables: dict[str, Any]) -> str:
+    """Plain-text Table I and Table II: rows are pictures, columns are recordings."""
+    scenes = tables["scenes"]
+    cells = tables["cells"]
+    head = ["picture \\ recording", *scenes]
+
+    def grid(title: str, value: Callable[[dict[str, Any]], str]) -> list[str]:
+        rows = [[f"{s} picture", *(value(cells[s][r]) for r in scenes)] for s in scenes]
+        widths = [max(len(str(x)) for x in col) for col in zip(head, *rows, strict=True)]
+        fmt = "  ".join(f"{{:<{w}}}" for w in widths)
+        return [title, fmt.format(*head), *(fmt.format(*row) for row in rows)]
+
+    lines = grid("Table I: terminal output", lambda c: c["line"])
+    lines.append("")
+    lines += grid("Table II: average confidence", lambda c: f"{c['confidence']:.3f}")
+    return "\n".join(lines)

@@ -1,0 +1,29 @@
+"""Fusion policies: when do a sound and a picture make a scene decision.
+
+A policy is fed predictions with their times and returns the events it produces (`Decision`,
+`FusionState`); time is always passed in, so tests run in no wall time.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from servant_core.events import Decision, FusionState
+from servant_core.fusion.sequential import FusionConfig, SequentialFusion, scene_line
+
+
+class FusionPolicy(Protocol):
+    def on_acoustic(
+        self, scene: str | None, confidence: float, t: float
+    ) -> list[Decision | FusionState]: ...
+    def on_visual(
+        self, scene: str | None, confidence: float, t: float
+    ) -> list[Decision | FusionState]: ...
+    def tick(self, t: float) -> list[Decision | FusionState]: ...
+    def wants_picture(self, t: float) -> bool: ...
+    def state(self, t: float) -> FusionState: ...
+
+
+POLICIES: dict[str, type] = {"sequential": SequentialFusion}
+
+__all__ = ["POLICIES", "FusionConfig", "FusionPolicy", "SequentialFusion", "scene_line"]

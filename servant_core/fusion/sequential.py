@@ -1,0 +1,109 @@
+"""The paper's sequential fusion: hear first, then look.
+
+An acoustic prediction opens a window of `acoustic_window_s` (30 s). Pictures are taken every
+`picture_interval_s` while it is open; the scene is detected when `pictures_needed` visual
+predictions agreeing with the acoustic one fall within `confirm_window_s` (20 s) of each other,
+before the window closes. Then it says `<Scene>Scene detected` with the average of the acoustic
+confidence and the mean confidence of the confirming pictures. If the window closes first it says
+`No scene detected` (confidence 0.000) and starts listening again. While a window is open, further
+acoustic predictions are ignored, as in the paper, which does not listen while it looks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from servant_core.events import Decision, FusionState
+from servant_core.recognisers.base import UNKNOWN
+
+NO_SCENE = "No scene detected"
+
+
+def scene_line(scene: str | None) -> str:
+    """The paper's terminal line: "coffee" → "CoffeeScene detected"; None → "No scene detected"."""
+    if scene is None:
+        return NO_SCENE
+    words = scene.replace("-", " ").replace("_", " ").split()
+    return "".join(w[:1].upper() + w[1:] for w in words) + "Scene detected"
+
+
+@dataclass(frozen=True)
+class FusionConfig:
+    acoustic_window_s: float = 30.0
+    confirm_window_s: float = 20.0
+    pictures_needed: int = 3
+    picture_interval_s: float = 2.0
+
+
+class SequentialFusion:
+    def __init__(self, config: FusionConfig | None = None) -> None:
+        self.config = config or FusionConfig()
+        self._restart()
+
+    def _restart(self) -> None:
+        self.scene: str | None = None
+        self.opened_at: float | None = None
+        self.acoustic_confidence = 0.0
+        self.matches: list[tuple[float, float]] = []  # (time, confidence) of agreeing pictures
+        self.pictures_taken = 0
+        self.last_picture_at: float | None = None
+
+    @property
+    def phase(self) -> str:
+        if self.opened_at is None:
+            return "listening"
+        return "confirming" if self.matches else "looking"
+
+    def state(self, t: float) -> FusionState:
+        left = None
+        if self.opened_at is not None:
+            left = max(0.0, self.opened_at + self.config.acoustic_window_s - t)
+        return FusionState(t, self.phase, self.scene, left, self.pictures_taken)
+
+    def tick(self, t: float) -> list[Decision | FusionState]:
+        """Close the window if its time is up: `No scene detected`, and listen again."""
+        if self.opened_at is None or t - self.opened_at <= self.config.acoustic_window_s:
+            return []
+        decision = Decision(t, None, 0.0, NO_SCENE, self.acoustic_confidence, 0.0)
+        self._restart()
+        return [decision, self.state(t)]
+
+    def on_acoustic(
+        self, scene: str | None, confidence: float, t: float
+    ) -> list[Decision | FusionState]:
+        events = self.tick(t)
+        if self.opened_at is not None or scene is None or scene == UNKNOWN:
+            return events
+        self.scene, self.opened_at, self.acoustic_confidence = scene, t, float(confidence)
+        return [*events, self.state(t)]
+
+    def on_visual(
+        self, scene: str | None, confidence: float, t: float
+    ) -> list[Decision | FusionState]:
+        events = self.tick(t)
+        if self.opened_at is None:
+            return events  # a picture with no sound before it decides nothing
+        self.pictures_taken += 1
+        self.last_picture_at = t
+        if scene == self.scene:
+            window = self.config.confirm_window_s
+            self.matches = [m for m in self.matches if t - m[0] <= window] + [
+                (t, float(confidence))
+            ]
+            if len(self.matches) >= self.config.pictures_needed:
+                visual = sum(c for _, c in self.matches) / len(self.matches)
+                average = (self.acoustic_confidence + visual) / 2.0
+                decision = Decision(
+                    t, self.scene, average, scene_line(self.scene), self.acoustic_confidence, visual
+                )
+                self._restart()
+                return [*events, decision, self.state(t)]
+        return [*events, self.state(t)]
+
+    def wants_picture(self, t: float) -> bool:
+        if self.opened_at is None:
+            return False
+        return (
+            self.last_picture_at is None
+            or t - self.last_picture_at >= self.config.picture_interval_s
+        )

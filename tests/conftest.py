@@ -1,0 +1,57 @@
+"""Shared fixtures: where the real data is, and small scene libraries built from it."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def shared_data_dir() -> Path | None:
+    """`../shared/data` beside the repository, or $SERVANT_SHARED_DATA."""
+    candidates = [os.environ.get("SERVANT_SHARED_DATA"), REPO.parent / "shared" / "data"]
+    for candidate in candidates:
+        if candidate and Path(candidate, "audio", "dev").is_dir():
+            return Path(candidate)
+    return None
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    found = shared_data_dir()
+    if found is None:
+        pytest.skip("the real data (../shared/data or $SERVANT_SHARED_DATA) is not on this machine")
+    return found
+
+
+@pytest.fixture(autouse=True)
+def _private_dirs(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Keep every test away from the user's real data and config directories."""
+    base = tmp_path_factory.mktemp("servant-home")
+    monkeypatch.setenv("SERVANT_DATA_DIR", str(base / "data"))
+    monkeypatch.setenv("SERVANT_CONFIG_DIR", str(base / "config"))
+
+
+def link_library(
+    root: Path, shared: Path, scenes: dict[str, tuple[list[str], int]]
+) -> Path:
+    """A scene library of symbolic links into the real data (nothing is copied):
+    scenes maps scene -> (recording file names, number of pictures taken by file order)."""
+    for scene, (recordings, n_pictures) in scenes.items():
+        folder = root / scene
+        folder.mkdir(parents=True, exist_ok=True)
+        for name in recordings:
+            (folder / name).symlink_to(shared / "audio" / "dev" / scene / name)
+        pictures = sorted((shared / "images" / "dev" / scene).glob("*.jpg"))[:n_pictures]
+        for picture in pictures:
+            (folder / picture.name).symlink_to(picture)
+    return root
+
+
+def tone(freq: float, seconds: float, rate: int, amplitude: float = 0.5) -> np.ndarray:
+    t = np.arange(int(round(seconds * rate))) / rate
+    return (amplitude * np.sin(2 * np.pi * freq * t)).astype(np.float32)
