@@ -50,7 +50,6 @@ class KMeansSceneRecogniser:
             n_clusters=len(self.scenes_),
             n_init=self.n_init,
             random_state=self.random_state,
-            copy_x=False,  # centre X in place and restore it: no second copy of large vectors
         )
         clusters = kmeans.fit_predict(X)
         self.centres_ = kmeans.cluster_centers_.astype(np.float32)
