@@ -190,9 +190,10 @@ class Engine:
         return dict(self._status)
 
     def _report(self, device: str, ok: bool, message: str) -> None:
-        """Emit a DeviceStatus when a device's state or message changes: a fault is said once."""
+        """Emit a DeviceStatus when a device's state changes: a fault is said once, however it then
+        fails to reopen, until the device works again."""
         previous = self._status.get(device)
-        if previous is not None and previous.ok == ok and previous.message == message:
+        if previous is not None and previous.ok == ok and (previous.message == message or not ok):
             return
         status = DeviceStatus(self.clock(), device, ok, message)
         self._status[device] = status
