@@ -1,4 +1,4 @@
-"""Replaying recordings and pictures as if live: pacing, clocks, bad files, scene-synced pictures."""
+"""Replaying recordings and pictures as if live: pacing, clocks, bad files, matching pictures."""
 
 from __future__ import annotations
 
