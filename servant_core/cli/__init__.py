@@ -17,7 +17,11 @@ from typing import Any
 
 from servant_core.errors import ServantError
 
-SUBCOMMAND_MODULES = ("servant_core.cli.recognition",)
+SUBCOMMAND_MODULES = (
+    "servant_core.cli.recognition",
+    "servant_core.cli.arm",
+    "servant_core.cli.live",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,145 @@
+"""The headless command line end to end, over small real libraries (symbolic links into
+../shared/data) and over bad input."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from servant_core.cli import main
+from tests.conftest import REPO, link_library
+
+SMALL = {
+    "cafe": (["moodist-crowded-bar.mp3"], 12),
+    "street": (["moodist-traffic.mp3"], 12),
+    "vehicle": (["moodist-airplane.mp3"], 12),
+}
+
+
+@pytest.fixture(scope="module")
+def small_library(shared_data, tmp_path_factory):
+    return link_library(tmp_path_factory.mktemp("lib"), shared_data, SMALL)
+
+
+def run_json(capsys, *argv):
+    assert main([*argv, "--json"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_eval_audio_both_protocols_end_to_end(small_library, capsys):
+    temporal = run_json(
+        capsys,
+        "eval",
+        "audio",
+        str(small_library),
+        "--protocol",
+        "temporal",
+        "--method",
+        "paper",
+        "--rate",
+        "16000",
+    )
+    assert temporal["protocol"] == "temporal" and temporal["method"] == "paper"
+    # 58.7 s, 39.9 s and 60.0 s at 5 s windows: 11 + 7 + 12 windows, the first 60 % of each train
+    assert temporal["n_test"] == (11 - 6) + (7 - 4) + (12 - 7)
+    assert set(temporal["per_class"]) == {"cafe", "street", "vehicle"}
+    assert 0.0 <= temporal["balanced_accuracy"] <= 1.0 and temporal["log_loss"] >= 0
+    recording = run_json(
+        capsys, "eval", "audio", str(small_library), "--protocol", "recording", "--rate", "16000"
+    )
+    # one recording per scene: each left-out scene is absent from its training set
+    assert recording["n_test"] == 11 + 7 + 12
+    assert recording["accuracy"] == 0.0
+
+
+def test_eval_image_by_file_order(small_library, capsys):
+    result = run_json(capsys, "eval", "image", str(small_library), "--method", "paper")
+    assert result["n_test"] == 3 * (12 - 8) and result["n_train"] == 3 * 8
+    assert set(result["per_class"]) == {"cafe", "street", "vehicle"}
+
+
+def test_train_predict_and_table(small_library, tmp_path, capsys):
+    model = tmp_path / "model.npz"
+    summary = run_json(capsys, "train", str(small_library), "-o", str(model), "--rate", "16000")
+    assert model.is_file() and summary["acoustic"]["scenes"] == ["cafe", "street", "vehicle"]
+    picture = sorted((small_library / "street").glob("*.jpg"))[0]
+    out = run_json(
+        capsys,
+        "predict",
+        str(model),
+        "--audio",
+        str(small_library / "street" / "moodist-traffic.mp3"),
+        "--image",
+        str(picture),
+    )
+    assert len(out["acoustic"]) == 7 and out["visual"][0]["picture"] == str(picture)
+    assert out["decision"]["line"].endswith("detected")
+    assert (out["decision"]["line"] == "No scene detected") == (out["decision"]["scene"] is None)
+    assert main(["table", str(small_library), "--audio-method", "paper"]) == 0
+    text = capsys.readouterr().out
+    assert "Table I" in text and "Table II" in text and "street picture" in text
+
+
+def test_fusion_eval_reports_decision_rate(small_library, capsys):
+    result = run_json(capsys, "eval", "fusion", str(small_library), "--pictures", "1")
+    assert result["n_test"] > 0 and 0.0 <= result["decision_rate"] <= 1.0
+    assert result["scenes"] == ["cafe", "street", "vehicle"]
+
+
+def test_one_scene_only_is_refused_and_writes_nothing(tmp_path, capsys):
+    (tmp_path / "lib" / "cafe").mkdir(parents=True)
+    for i in range(2):
+        image = np.full((8, 8, 3), 40 * i, np.uint8)
+        import cv2
+
+        cv2.imwrite(str(tmp_path / "lib" / "cafe" / f"p{i}.png"), image)
+    model = tmp_path / "m.npz"
+    assert main(["train", str(tmp_path / "lib"), "-o", str(model)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("servant: error:") and err.count("\n") == 1
+    assert not model.exists()
+
+
+def test_bad_files_name_the_file_and_leave_an_old_model_intact(tmp_path, capsys):
+    import cv2
+
+    lib = tmp_path / "lib"
+    for scene, value in [("cafe", 30), ("gym", 200)]:
+        (lib / scene).mkdir(parents=True)
+        for i in range(3):
+            cv2.imwrite(str(lib / scene / f"p{i}.png"), np.full((8, 8, 3), value + i, np.uint8))
+    model = tmp_path / "m.npz"
+    assert main(["train", str(lib), "-o", str(model)]) == 0
+    before = model.read_bytes()
+    (lib / "gym" / "broken.jpg").write_bytes(b"not a picture")
+    (lib / "cafe" / "empty.wav").write_bytes(b"")
+    capsys.readouterr()
+    assert main(["train", str(lib), "-o", str(model)]) == 2
+    err = capsys.readouterr().err
+    assert ("empty.wav" in err or "broken.jpg" in err) and err.count("\n") == 1
+    assert model.read_bytes() == before
+    # --skip-bad warns for each bad file and trains on the rest
+    assert main(["train", str(lib), "-o", str(model), "--skip-bad"]) == 0
+    err = capsys.readouterr().err
+    assert "broken.jpg" in err
+
+
+def test_predict_with_a_foreign_model_and_a_non_picture(tmp_path, capsys):
+    foreign = tmp_path / "foreign.npz"
+    np.savez(foreign, x=np.ones(2))
+    assert main(["predict", str(foreign), "--image", str(foreign)]) == 2
+    assert "not a Servant model file" in capsys.readouterr().err
+
+
+def test_console_script_lists_subcommands():
+    out = subprocess.run(
+        [sys.executable, "-m", "servant_tui", "--help"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        check=True,
+    ).stdout
+    for command in ("train", "predict", "eval", "table"):
+        assert command in out
