@@ -1,66 +1,62 @@
 """The `servant` console script: the TUI, or a headless subcommand of servant_core.cli.
 
-`servant` alone opens the TUI on the live devices; `servant demo` opens it on the demo scenes
-(`servant demo --headless`, where the engine offers it, stays on the command line). Every other
-subcommand is servant_core's.
+`servant` alone (or `servant run`) opens the TUI on the live devices; `servant demo` opens it on
+the demo scenes. With `--headless` (or `demo --fast`) they print lines instead, as servant_core's
+other subcommands do.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 from servant_core.cli import build_parser as build_core_parser
 from servant_core.cli import run_handler
+from servant_core.engine import LiveSettings, build_demo_engine, build_live_engine
 from servant_core.errors import ServantError
 
 
-def _subparsers(parser: argparse.ArgumentParser) -> argparse._SubParsersAction:
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            return action
-    raise RuntimeError("servant_core.cli.build_parser() has no subcommands")
-
-
 def build_parser() -> argparse.ArgumentParser:
-    parser = build_core_parser()
-    subparsers = _subparsers(parser)
-    if "demo" not in subparsers.choices:
-        demo = subparsers.add_parser(
-            "demo", help="open the terminal application on the demo scenes"
-        )
-        demo.add_argument("--seed", type=int, default=0, help="seed of the demo scenes")
-    return parser
+    """servant_core's parser: its `demo` and `run` open the TUI here unless `--headless`."""
+    return build_core_parser()
 
 
-def run_tui(demo: bool, seed: int = 0) -> int:
+def run_tui(engine_factory: Callable[[], Any], mode: str) -> int:
     from servant_tui.app import ServantApp
 
     try:
-        if demo:
-            from servant_core.engine import build_demo_engine
-
-            app = ServantApp(build_demo_engine(seed=seed), mode="demo")
-        else:
-            from servant_core.engine import build_live_engine
-            from servant_core.settings import load_settings
-
-            settings = load_settings()
-            app = ServantApp(build_live_engine(settings), mode="live", settings=settings)
+        engine = engine_factory()
     except ServantError as error:
         print(f"servant: error: {error}", file=sys.stderr)
         return 2
+    app = ServantApp(engine, mode=mode)
     app.run()
     return app.return_code or 0
 
 
+def live_settings(args: argparse.Namespace | None) -> LiveSettings:
+    """`servant run`'s options; `servant` alone takes the defaults (the default input, camera 0)."""
+    if args is None:
+        return LiveSettings()
+    return LiveSettings(
+        model=args.model,
+        microphone=args.mic,
+        rate=args.rate,
+        use_microphone=not args.no_mic,
+        camera=None if args.no_camera else args.camera,
+    )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if args.command is None:
-        return run_tui(demo=False)
-    if args.command == "demo" and not getattr(args, "headless", False):
-        return run_tui(demo=True, seed=getattr(args, "seed", 0))
+    headless = getattr(args, "headless", False)
+    if args.command is None or (args.command == "run" and not headless and not args.list_devices):
+        settings = live_settings(args if args.command else None)
+        return run_tui(lambda: build_live_engine(settings), "live")
+    if args.command == "demo" and not headless and not args.fast:
+        return run_tui(lambda: build_demo_engine(args.seed), "demo")
     return run_handler(args)
 
 

@@ -9,7 +9,7 @@ from textual.widgets import DataTable, Input, Sparkline
 from servant_tui.app import ServantApp
 from servant_tui.screens.teach import TeachScreen
 from tests.test_tui_live import settle
-from tests.tui_library import noise_recording
+from tests.tui_library import RATE, noise_recording
 from tests.tui_replay import ReplayEngine
 
 records = pytest.importorskip("servant_core.actions.records", reason="teach records come with the servo work")
@@ -33,7 +33,7 @@ async def test_teach_flow_from_scene_to_tested_pose(tmp_path, monkeypatch):
     monkeypatch.setenv("SERVANT_DATA_DIR", str(tmp_path / "data"))
     monkeypatch.setenv("SERVANT_CONFIG_DIR", str(tmp_path / "config"))
     root = tmp_path / "library"
-    engine = ReplayEngine(window_source=noise_recording(12.0, 500.0, seed=3))
+    engine = ReplayEngine(window_source=noise_recording(12.0, 500.0, seed=3), audio_rate=RATE)
     app = ServantApp(engine, library_root=root)
     async with app.run_test(size=(120, 40)) as pilot:
         await settle(pilot, lambda: engine.started.is_set() and app.arm_state is not None)

@@ -85,8 +85,13 @@ class ReplayEngine:
     """Emits `script` on `start()`, in order, from the calling thread; records what it is asked."""
 
     def __init__(
-        self, script: list[Any] | None = None, *, window_source: np.ndarray | None = None
+        self,
+        script: list[Any] | None = None,
+        *,
+        window_source: np.ndarray | None = None,
+        audio_rate: int = RATE,
     ) -> None:
+        self.audio_rate = audio_rate
         self.script = demo_script() if script is None else script
         self.callbacks: list[Callable[[Any], None]] = []
         self.started = threading.Event()
@@ -142,7 +147,7 @@ class ReplayEngine:
         """The next `seconds` of the replayed source (a recording the test hands in)."""
         if self.window_source is None:
             raise ServantError("microphone: no audio source in this replay")
-        n = int(seconds * RATE)
+        n = int(seconds * self.audio_rate)
         start = (self.windows_recorded * n) % max(len(self.window_source) - n, 1)
         self.windows_recorded += 1
         self.emit(spectrum_frame(self.t, seed=self.windows_recorded))

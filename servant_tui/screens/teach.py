@@ -34,7 +34,7 @@ from textual.widgets import (
     Static,
 )
 
-from servant_core.audio import DEFAULT_RATE, DEFAULT_WINDOW_SECONDS, write_wav
+from servant_core.audio import DEFAULT_WINDOW_SECONDS, write_wav
 from servant_core.errors import ServantError
 from servant_core.events import SpectrumFrame
 from servant_core.features.palette import dominant_colours
@@ -200,7 +200,7 @@ class TeachScreen(Screen[None]):
     def record(self, scene: str) -> None:
         try:
             audio = np.asarray(self.app.engine.record_window(DEFAULT_WINDOW_SECONDS), dtype=np.float32)
-            rate = int(getattr(self.app.engine, "rate", DEFAULT_RATE))
+            rate = self.app.engine.audio_rate
             path = write_wav(self.root / scene / f"{stamp()}.wav", audio, rate)
         finally:
             self.app.call_from_thread(self._recording_over)
