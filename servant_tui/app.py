@@ -69,7 +69,9 @@ class ServantApp(App[None]):
         super().__init__()
         self.engine = engine
         self.sub_title = "demo scenes" if mode == "demo" else "live devices"
-        self.library_root = library_root or getattr(engine, "library_root", None) or default_library_root()
+        self.library_root = (
+            library_root or getattr(engine, "library_root", None) or default_library_root()
+        )
         self.settings = settings
         self.arm_state: ArmState | None = None
         self.known_scenes: set[str] = set()

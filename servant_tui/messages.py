@@ -14,7 +14,7 @@ from servant_core.events import SpectrumFrame
 
 
 class EngineEvent(Message):
-    """Any engine event but a spectrum frame (those have their own message, which may be dropped)."""
+    """Any engine event but a spectrum frame (those have their own, droppable, message)."""
 
     def __init__(self, event: Any) -> None:
         super().__init__()

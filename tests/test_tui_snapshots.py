@@ -86,9 +86,13 @@ def test_teach_screen(snap_compare, size, library):
 
 @pytest.mark.parametrize("size", SIZES)
 def test_settings_screen(snap_compare, size, library):
-    settings = pytest.importorskip("servant_core.settings", reason="settings come with the servo work")
+    settings = pytest.importorskip(
+        "servant_core.settings", reason="settings come with the servo work"
+    )
     from servant_tui.screens.settings import SettingsScreen
 
-    app = ServantApp(ReplayEngine(), mode="demo", library_root=library, settings=settings.Settings())
+    app = ServantApp(
+        ReplayEngine(), mode="demo", library_root=library, settings=settings.Settings()
+    )
     until = lambda app: isinstance(app.screen, SettingsScreen)  # noqa: E731
     assert snap_compare(app, terminal_size=size, run_before=replayed(app, ("s",), until))

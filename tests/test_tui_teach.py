@@ -12,7 +12,9 @@ from tests.test_tui_live import settle
 from tests.tui_library import RATE, noise_recording
 from tests.tui_replay import ReplayEngine
 
-records = pytest.importorskip("servant_core.actions.records", reason="teach records come with the servo work")
+records = pytest.importorskip(
+    "servant_core.actions.records", reason="teach records come with the servo work"
+)
 
 
 async def type_into(pilot, selector: str, text: str) -> None:
@@ -63,7 +65,10 @@ async def test_teach_flow_from_scene_to_tested_pose(tmp_path, monkeypatch):
         await teach_pose(pilot, screen, {"shoulder": "150", "elbow": "20", "wrist": "10"})
         await settle(pilot, lambda: screen.query_one("#samples", DataTable).row_count == 2)
         saved = records.load_records()
-        assert [(r.scene, r.pose["shoulder"]) for r in saved] == [("CoffeeScene", 30.0), ("GymScene", 150.0)]
+        assert [(r.scene, r.pose["shoulder"]) for r in saved] == [
+            ("CoffeeScene", 30.0),
+            ("GymScene", 150.0),
+        ]
 
         screen.go("train")
         await pilot.pause()
@@ -82,7 +87,9 @@ async def test_teach_flow_from_scene_to_tested_pose(tmp_path, monkeypatch):
         await pilot.pause()
         await pilot.click("#retrain")
         await settle(pilot, lambda: engine.retrained)
-        assert engine.retrained[0].scenes == ["CoffeeScene"], "GymScene was taught a pose, no sample"
+        assert engine.retrained[0].scenes == ["CoffeeScene"], (
+            "GymScene was taught a pose, no sample"
+        )
 
 
 async def test_a_pose_without_angles_is_refused_in_one_line(tmp_path, monkeypatch):

@@ -1,4 +1,4 @@
-"""The library screen: scenes with their recordings and pictures; relabel, delete, retrain, evaluate."""
+"""The library screen: scenes, their recordings and pictures; relabel, delete, retrain, evaluate."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from servant_tui.screens.dialogs import Confirm, ScenePrompt
 
 
 def free_path(folder: Path, name: str) -> Path:
-    """`folder/name`, or `folder/stem-2.suffix` and so on if that is taken: nothing is overwritten."""
+    """`folder/name`, or `folder/stem-2.suffix` and so on if taken: nothing is overwritten."""
     candidate = folder / name
     stem, suffix = Path(name).stem, Path(name).suffix
     n = 2
@@ -177,7 +177,8 @@ class LibraryScreen(Screen[None]):
         self.app.engine.retrain(library)
         self.post_message(
             RetrainDone(
-                f"retrained on {len(library.scenes)} scenes, {len(library.recordings)} recordings, {len(library.pictures)} pictures"
+                f"retrained on {len(library.scenes)} scenes, {len(library.recordings)} "
+                f"recordings, {len(library.pictures)} pictures"
             )
         )
 

@@ -1,4 +1,4 @@
-"""The settings screen: devices, the arm's joints and the fusion windows, saved through platformdirs."""
+"""The settings screen: devices, the arm's joints and the fusion windows (platformdirs)."""
 
 from __future__ import annotations
 
@@ -66,7 +66,12 @@ class SettingsScreen(Screen[None]):
                     yield Label(label)
                     yield Input("" if value is None else str(value), placeholder=hint, id=name)
                 yield Label("protocol")
-                yield Select([(p, p) for p in PROTOCOLS], value=settings.protocol, allow_blank=False, id="protocol")
+                yield Select(
+                    [(p, p) for p in PROTOCOLS],
+                    value=settings.protocol,
+                    allow_blank=False,
+                    id="protocol",
+                )
             yield Static("Joints (degrees, degrees per second)", classes="section")
             with Grid(classes="joints"):
                 yield Label("joint")
@@ -75,7 +80,9 @@ class SettingsScreen(Screen[None]):
                 for joint in settings.joints:
                     yield Label(f"{joint.name} (ch {joint.channel})")
                     for field in JOINT_FIELDS:
-                        yield Input(f"{getattr(joint, field):g}", id=f"{joint.name}-{field}", type="number")
+                        yield Input(
+                            f"{getattr(joint, field):g}", id=f"{joint.name}-{field}", type="number"
+                        )
             yield Static("Fusion", classes="section")
             with Grid(classes="form"):
                 for name, label in WINDOW_FIELDS:
@@ -99,7 +106,10 @@ class SettingsScreen(Screen[None]):
             dataclasses.replace(
                 joint,
                 **{
-                    field: number(self.query_one(f"#{joint.name}-{field}", Input).value, f"{joint.name} {field}")
+                    field: number(
+                        self.query_one(f"#{joint.name}-{field}", Input).value,
+                        f"{joint.name} {field}",
+                    )
                     for field in JOINT_FIELDS
                 },
             )

@@ -40,7 +40,13 @@ from servant_core.events import SpectrumFrame
 from servant_core.features.palette import dominant_colours
 from servant_core.library import SceneLibrary
 from servant_core.storage import atomic_write_bytes
-from servant_tui.messages import PictureTaken, RecordingDone, RetrainDone, TrainingDone, TrainingProgress
+from servant_tui.messages import (
+    PictureTaken,
+    RecordingDone,
+    RetrainDone,
+    TrainingDone,
+    TrainingProgress,
+)
 from servant_tui.widgets.colours import share_strip
 from servant_tui.widgets.spectrum import Spectrum
 
@@ -98,13 +104,21 @@ class TeachScreen(Screen[None]):
                     yield Input(placeholder="new scene name, e.g. CoffeeScene", id="new-scene")
                     yield Button("Use this scene", id="use-scene", variant="primary")
                 with Vertical(id="sound"):
-                    yield Label(f"Record {DEFAULT_WINDOW_SECONDS:g} s of the place's sound. Record a few.")
-                    yield Button(f"Record {DEFAULT_WINDOW_SECONDS:g} s", id="record", variant="primary")
-                    yield ProgressBar(total=DEFAULT_WINDOW_SECONDS, show_eta=False, id="record-progress")
+                    yield Label(
+                        f"Record {DEFAULT_WINDOW_SECONDS:g} s of the place's sound. Record a few."
+                    )
+                    yield Button(
+                        f"Record {DEFAULT_WINDOW_SECONDS:g} s", id="record", variant="primary"
+                    )
+                    yield ProgressBar(
+                        total=DEFAULT_WINDOW_SECONDS, show_eta=False, id="record-progress"
+                    )
                     yield self.spectrum
                     yield Static(id="sound-status")
                 with Vertical(id="pictures"):
-                    yield Label("Take pictures of the place (the camera's dominant colours are learnt).")
+                    yield Label(
+                        "Take pictures of the place (the camera's dominant colours are learnt)."
+                    )
                     yield Button("Take picture", id="take-picture", variant="primary")
                     yield Static(id="picture-status")
                 with Vertical(id="pose"):
@@ -119,7 +133,9 @@ class TeachScreen(Screen[None]):
                         yield Button("Teach another scene", id="again")
                     yield DataTable(id="samples", cursor_type="row")
                 with Vertical(id="train"):
-                    yield Label("Learn scene → pose from every teach record; retrain the recognisers.")
+                    yield Label(
+                        "Learn scene → pose from every teach record; retrain the recognisers."
+                    )
                     with Horizontal(classes="buttons"):
                         yield Button("Train", id="train-learner", variant="primary")
                         yield Button("Retrain recognisers", id="retrain")
@@ -173,7 +189,9 @@ class TeachScreen(Screen[None]):
             self.notify("Pick a known scene or type a new name.", severity="warning")
             return
         if "/" in scene or scene.startswith("."):
-            self.app.report_error(ServantError(f"{scene!r}: a scene name cannot hold '/' or start with '.'"))
+            self.app.report_error(
+                ServantError(f"{scene!r}: a scene name cannot hold '/' or start with '.'")
+            )
             return
         self.scene = scene
         self.sub_title = f"teaching {scene}"
@@ -194,12 +212,16 @@ class TeachScreen(Screen[None]):
     def _tick_recording(self) -> None:
         if self._recording_started is not None:
             elapsed = time.monotonic() - self._recording_started
-            self.query_one("#record-progress", ProgressBar).update(progress=min(elapsed, DEFAULT_WINDOW_SECONDS))
+            self.query_one("#record-progress", ProgressBar).update(
+                progress=min(elapsed, DEFAULT_WINDOW_SECONDS)
+            )
 
     @work(thread=True, exclusive=True, group="record", exit_on_error=False)
     def record(self, scene: str) -> None:
         try:
-            audio = np.asarray(self.app.engine.record_window(DEFAULT_WINDOW_SECONDS), dtype=np.float32)
+            audio = np.asarray(
+                self.app.engine.record_window(DEFAULT_WINDOW_SECONDS), dtype=np.float32
+            )
             rate = self.app.engine.audio_rate
             path = write_wav(self.root / scene / f"{stamp()}.wav", audio, rate)
         finally:
@@ -215,7 +237,8 @@ class TeachScreen(Screen[None]):
         self.windows += 1
         self.query_one("#record-progress", ProgressBar).update(progress=DEFAULT_WINDOW_SECONDS)
         self.query_one("#sound-status", Static).update(
-            f"{self.windows} window{'s' if self.windows > 1 else ''} recorded; last: {message.path.name} ({message.seconds:.1f} s)"
+            f"{self.windows} window(s) recorded; last: {message.path.name} "
+            f"({message.seconds:.1f} s)"
         )
         self.app.log_line(None, f"recorded {message.path}")
 
@@ -240,7 +263,7 @@ class TeachScreen(Screen[None]):
     @on(PictureTaken)
     def pictured(self, message: PictureTaken) -> None:
         self.pictures += 1
-        text = Text(f"{self.pictures} picture{'s' if self.pictures > 1 else ''} taken; last: {message.path.name}\n")
+        text = Text(f"{self.pictures} picture(s) taken; last: {message.path.name}\n")
         text.append_text(share_strip(np.asarray(message.colours), np.asarray(message.shares), 40))
         self.query_one("#picture-status", Static).update(text)
         self.app.log_line(None, f"took {message.path}")
@@ -251,7 +274,9 @@ class TeachScreen(Screen[None]):
     def use_arm_pose(self) -> None:
         state = self.app.arm_state
         if state is None or not state.connected:
-            self.app.report_error(ServantError("arm: not connected, so its pose cannot be read; type the angles"))
+            self.app.report_error(
+                ServantError("arm: not connected, so its pose cannot be read; type the angles")
+            )
             return
         for joint, angle in state.angles.items():
             for field in self.query(f"#joint-{joint}").results(Input):
@@ -266,12 +291,15 @@ class TeachScreen(Screen[None]):
             try:
                 angle = float(text)
             except ValueError:
-                raise ServantError(f"pose: {joint} needs an angle in degrees (got {text!r})") from None
+                raise ServantError(
+                    f"pose: {joint} needs an angle in degrees (got {text!r})"
+                ) from None
             if settings is not None:
                 limits = settings.joint(joint)
                 if not limits.min_angle <= angle <= limits.max_angle:
                     raise ServantError(
-                        f"pose: {joint} {angle:g}° is outside its limits {limits.min_angle:g}..{limits.max_angle:g}°; "
+                        f"pose: {joint} {angle:g}° is outside its limits "
+                        f"{limits.min_angle:g}..{limits.max_angle:g}°; "
                         "change the angle or the limits in Settings"
                     )
             pose[joint] = angle
@@ -327,13 +355,17 @@ class TeachScreen(Screen[None]):
             learner.fit(records, report=report)
             learner.save()
         finally:
-            self.app.call_from_thread(setattr, self.query_one("#train-learner", Button), "disabled", False)
+            self.app.call_from_thread(
+                setattr, self.query_one("#train-learner", Button), "disabled", False
+            )
         self.post_message(TrainingDone(learner))
 
     @on(TrainingProgress)
     def training_progress(self, message: TrainingProgress) -> None:
         self.errors.append(message.error)
-        self.query_one("#train-progress", ProgressBar).update(total=message.total, progress=message.step)
+        self.query_one("#train-progress", ProgressBar).update(
+            total=message.total, progress=message.step
+        )
         self.query_one("#error-curve", Sparkline).data = list(self.errors)
         self.query_one("#train-status", Static).update(
             f"iteration {message.step}/{message.total}: mean error {message.error:.2f}°"
@@ -375,7 +407,9 @@ class TeachScreen(Screen[None]):
         learner = self.learner
         for scene in learner.taught_scenes_:
             pose = learner.pose(label_scores(scene, learner.scenes_))
-            table.add_row(scene, *(f"{pose.get(j, float('nan')):.1f}°" for j in self.joints()), key=scene)
+            table.add_row(
+                scene, *(f"{pose.get(j, float('nan')):.1f}°" for j in self.joints()), key=scene
+            )
 
     def _try(self, step: Any) -> Any:
         try:
