@@ -37,9 +37,13 @@ def run_tui(engine_factory: Callable[[], Any], mode: str) -> int:
 
 
 def live_settings(args: argparse.Namespace | None) -> LiveSettings:
-    """`servant run`'s options; `servant` alone takes the defaults (the default input, camera 0)."""
+    """`servant run`'s options; `servant` alone takes the devices chosen in Settings."""
     if args is None:
-        return LiveSettings()
+        from servant_core.settings import load_settings
+
+        chosen = load_settings()
+        camera = chosen.camera if chosen.camera is not None else 0
+        return LiveSettings(microphone=chosen.audio_device, camera=camera)
     return LiveSettings(
         model=args.model,
         microphone=args.mic,
@@ -53,8 +57,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     headless = getattr(args, "headless", False)
     if args.command is None or (args.command == "run" and not headless and not args.list_devices):
-        settings = live_settings(args if args.command else None)
-        return run_tui(lambda: build_live_engine(settings), "live")
+        return run_tui(
+            lambda: build_live_engine(live_settings(args if args.command else None)), "live"
+        )
     if args.command == "demo" and not headless and not args.fast:
         return run_tui(lambda: build_demo_engine(args.seed), "demo")
     return run_handler(args)

@@ -86,11 +86,18 @@ class TeachScreen(Screen[None]):
         return self.app.library_root
 
     def joints(self) -> list[str]:
-        if self.app.settings is not None:
-            return [joint.name for joint in self.app.settings.joints]
-        if self.app.arm_state is not None:
+        """The connected arm's joints, else the configured ones."""
+        if self.app.arm_state is not None and self.app.arm_state.angles:
             return list(self.app.arm_state.angles)
-        return []
+        from servant_core.settings import load_settings
+
+        if self.app.settings is None:
+            try:
+                self.app.settings = load_settings()
+            except ServantError as error:
+                self.app.report_error(error)
+                return []
+        return [joint.name for joint in self.app.settings.joints]
 
     def compose(self) -> ComposeResult:
         scenes = SceneLibrary.scan(self.root).scenes if self.root.is_dir() else []
@@ -294,7 +301,7 @@ class TeachScreen(Screen[None]):
                 raise ServantError(
                     f"pose: {joint} needs an angle in degrees (got {text!r})"
                 ) from None
-            if settings is not None:
+            if settings is not None and joint in {j.name for j in settings.joints}:
                 limits = settings.joint(joint)
                 if not limits.min_angle <= angle <= limits.max_angle:
                     raise ServantError(
