@@ -27,7 +27,7 @@ from servant_core.events import (
 from servant_core.storage import data_dir
 from servant_tui.messages import EngineEvent, SpectrumUpdate
 from servant_tui.screens.dialogs import HelpScreen, LabelPrompt
-from servant_tui.screens.live import LiveScreen
+from servant_tui.screens.live import LiveScreen, device_message
 from servant_tui.widgets.text import clock
 
 
@@ -126,7 +126,7 @@ class ServantApp(App[None]):
         if isinstance(event, ErrorEvent):
             self.notify(event.message, title="Servant", severity="error")
         elif isinstance(event, DeviceStatus) and not event.ok:
-            self.notify(f"{event.device}: {event.message}", severity="warning")
+            self.notify(f"{event.device}: {device_message(event)}", severity="warning")
         elif isinstance(event, UnknownScene):
             self._ask_label(event)
         for screen in self._event_screens():
@@ -150,7 +150,7 @@ class ServantApp(App[None]):
             return f"[magenta]unknown place ({event.sense}{nearest}): asking for a label[/]"
         if isinstance(event, DeviceStatus):
             style = "dim" if event.ok else "red"
-            return f"[{style}]{event.device}: {escape(event.message)}[/]"
+            return f"[{style}]{event.device}: {escape(device_message(event))}[/]"
         if isinstance(event, ErrorEvent):
             return f"[bold red]{escape(event.message)}[/]"
         return None

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from rich.markup import escape
 from textual.app import ComposeResult
 from textual.containers import Grid
 from textual.screen import Screen
@@ -14,6 +15,11 @@ from servant_tui.widgets.scene import ScenePane
 from servant_tui.widgets.spectrum import Spectrum
 
 DEVICES = ("microphone", "camera", "servo")
+
+
+def device_message(status: DeviceStatus) -> str:
+    """The status message without a repeat of the device's name in front."""
+    return status.message.removeprefix(f"{status.device}: ")
 
 
 class DeviceBar(Static):
@@ -41,9 +47,9 @@ class DeviceBar(Static):
             if status is None:
                 parts.append(f"[dim]{device} …[/]")
             elif status.ok:
-                parts.append(f"[green]{device} ✓[/] [dim]{status.message}[/]")
+                parts.append(f"[green]{device} ✓[/] [dim]{escape(device_message(status))}[/]")
             else:
-                parts.append(f"[bold red]{device} ✗[/] [red]{status.message}[/]")
+                parts.append(f"[bold red]{device} ✗[/] [red]{escape(device_message(status))}[/]")
         return "   ".join(parts)
 
 
