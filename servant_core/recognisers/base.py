@@ -103,13 +103,17 @@ def cluster_spreads(X: np.ndarray, clusters: np.ndarray, centres: np.ndarray) ->
     """Root-mean-square distance of each cluster's members to their centre (its own spread).
 
     An empty or single-member cluster takes the median spread of the others, so it is neither
-    infinitely sharp nor infinitely vague.
+    infinitely sharp nor infinitely vague. Distances are taken row by row against the centres
+    (an (n, K) matrix), never as a copy of the members: X can be hundreds of megabytes.
     """
+    from sklearn.metrics.pairwise import euclidean_distances
+
+    own = euclidean_distances(X, centres)[np.arange(len(X)), clusters]
     spreads = np.full(len(centres), np.nan)
     for c in range(len(centres)):
-        members = X[clusters == c]
+        members = own[clusters == c]
         if len(members) > 1:
-            spreads[c] = np.sqrt(np.mean(np.sum((members - centres[c]) ** 2, axis=1)))
+            spreads[c] = np.sqrt(np.mean(members.astype(float) ** 2))
     fallback = np.nanmedian(spreads) if np.any(np.isfinite(spreads)) else 1.0
     spreads[~np.isfinite(spreads) | (spreads <= 0)] = fallback if fallback > 0 else 1.0
     return spreads
