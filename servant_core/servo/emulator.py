@@ -22,7 +22,7 @@ from servant_core.errors import ServantError
 from servant_core.servo import PROTOCOLS, firmata, maestro, ssc32
 
 FAULTS = (None, "silent", "garbage")
-GARBAGE = b"\xff\x00\xfe\x13\x37"
+GARBAGE = b"\xff" * 8  # line noise, as a wrong baud rate gives; no protocol accepts it
 SSC32_VERSION = b"SSC32-V2.50USB"
 FIRMATA_VERSION = (2, 5)
 FIRMATA_DEFAULT_PULSES = (544, 2400)  # the Arduino Servo library's defaults
