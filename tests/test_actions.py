@@ -41,7 +41,9 @@ def learner():
 
 def test_records_round_trip_atomically():
     first = record("coffee", {"shoulder": 42.0}, t=1.0)
-    second = TeachRecord("gym", perceived("gym", 0.7), {"shoulder": 10.0, "elbow": 30.0}, 2.0, "perceived")
+    second = TeachRecord(
+        "gym", perceived("gym", 0.7), {"shoulder": 10.0, "elbow": 30.0}, 2.0, "perceived"
+    )
     append_record(first)
     assert append_record(second) == [first, second]
     assert load_records() == [first, second]
@@ -61,7 +63,9 @@ def test_a_bad_record_is_named(tmp_path):
     path = tmp_path / "records.json"
     good = {"scene": "gym", "scores": {"acoustic": {"gym": 1.0}}, "pose": {"shoulder": 3}}
     bad = {"scene": "coffee", "scores": {"acoustic": {"coffee": 1.0}}, "pose": {"shoulder": "high"}}
-    path.write_text(json.dumps({"format": "servant-teach-records", "version": 2, "records": [good, bad]}))
+    path.write_text(
+        json.dumps({"format": "servant-teach-records", "version": 2, "records": [good, bad]})
+    )
     with pytest.raises(ServantError, match=r"record 2: pose\['shoulder'\] is not a finite number"):
         load_records(path)
 
@@ -75,7 +79,10 @@ def test_records_from_an_older_version_are_migrated_and_backed_up(tmp_path):
     }
     path.write_text(json.dumps(v1))
     records = load_records(path, legacy_joint="elbow")
-    assert [(r.scene, r.pose) for r in records] == [("coffee", {"elbow": 42.0}), ("gym", {"elbow": 10.0})]
+    assert [(r.scene, r.pose) for r in records] == [
+        ("coffee", {"elbow": 42.0}),
+        ("gym", {"elbow": 10.0}),
+    ]
     assert records[0].scores["visual"] == {"coffee": 1.0, "gym": 0.0}
     append_record(record("street", {"elbow": 70.0}), path, legacy_joint="elbow")
     assert json.loads((tmp_path / "records.json.v1.bak").read_text()) == v1
@@ -92,11 +99,17 @@ def test_records_from_a_newer_version_are_refused(tmp_path):
 def test_learner_reproduces_fig6_and_reports_a_falling_error():
     reports = []
     records = [record("coffee", {"shoulder": 42.0}), record("gym", {"shoulder": 10.0})]
-    learner = ActionLearner(max_iter=3000, report_every=1000).fit(records, report=lambda *r: reports.append(r))
+    learner = ActionLearner(max_iter=3000, report_every=1000).fit(
+        records, report=lambda *r: reports.append(r)
+    )
     assert [i for i, _ in reports] == [1, 1000, 2000, 3000]
     assert reports[-1][1] < reports[0][1] / 100
-    assert learner.predict(label_scores("coffee", SCENES), "coffee", 100).pose["shoulder"] == pytest.approx(42, abs=0.5)
-    assert learner.predict(label_scores("gym", SCENES), "gym", 100).pose["shoulder"] == pytest.approx(10, abs=0.5)
+    assert learner.predict(label_scores("coffee", SCENES), "coffee", 100).pose[
+        "shoulder"
+    ] == pytest.approx(42, abs=0.5)
+    assert learner.predict(label_scores("gym", SCENES), "gym", 100).pose[
+        "shoulder"
+    ] == pytest.approx(10, abs=0.5)
 
 
 def test_learner_refuses_untaught_scenes_and_low_confidence(learner):
@@ -123,11 +136,16 @@ def test_learner_uses_the_perceived_scores():
 
 
 def test_missing_joints_take_home_or_are_refused():
-    records = [record("coffee", {"shoulder": 42.0, "elbow": 20.0}), record("gym", {"shoulder": 10.0})]
+    records = [
+        record("coffee", {"shoulder": 42.0, "elbow": 20.0}),
+        record("gym", {"shoulder": 10.0}),
+    ]
     with pytest.raises(ServantError, match=r"record 2 \(gym\) has no angle for joint 'elbow'"):
         ActionLearner(max_iter=10).fit(records)
     learner = ActionLearner(max_iter=2000, home={"elbow": 90.0}).fit(records)
-    assert learner.pose(label_scores("gym", SCENES)) == pytest.approx({"shoulder": 10.0, "elbow": 90.0}, abs=0.5)
+    assert learner.pose(label_scores("gym", SCENES)) == pytest.approx(
+        {"shoulder": 10.0, "elbow": 90.0}, abs=0.5
+    )
 
 
 def test_learner_file_round_trip_without_pickle(learner, tmp_path):
@@ -150,9 +168,12 @@ def test_damaged_learner_files_are_refused(tmp_path):
         ActionLearner.load(junk)
 
 
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
 def test_numpy_forward_pass_matches_scikit_learn():
     rng = np.random.default_rng(0)
     x, y = rng.random((20, 6)), rng.random((20, 2))
     for activation in ("tanh", "relu", "logistic"):
-        net = MLPRegressor(hidden_layer_sizes=(8, 5), activation=activation, max_iter=50, random_state=0).fit(x, y)
+        net = MLPRegressor(
+            hidden_layer_sizes=(8, 5), activation=activation, max_iter=50, random_state=0
+        ).fit(x, y)
         assert np.allclose(forward(x, net.coefs_, net.intercepts_, activation), net.predict(x))

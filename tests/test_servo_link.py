@@ -22,11 +22,15 @@ def emulator():
 
 def dry_link(protocol="maestro"):
     clock = ManualClock()
-    return ServoLink.open(None, protocol, JOINTS, dry_run=True, clock=clock, sleep=clock.sleep), clock
+    return ServoLink.open(
+        None, protocol, JOINTS, dry_run=True, clock=clock, sleep=clock.sleep
+    ), clock
 
 
 def test_unknown_protocol_is_one_clear_error():
-    with pytest.raises(ServantError, match="protocol 'lx16a' is unknown; use one of maestro, ssc32, firmata"):
+    with pytest.raises(
+        ServantError, match="protocol 'lx16a' is unknown; use one of maestro, ssc32, firmata"
+    ):
         ServoLink.open("/dev/ttyUSB0", "lx16a", JOINTS)
 
 
@@ -92,9 +96,13 @@ def test_nothing_moves_unless_armed():
 def test_dry_run_shows_the_exact_bytes():
     link, clock = dry_link()
     # Setup: each joint's speed limit (shoulder 30 deg/s = 166.7 us/s -> 6 units of 25 us/s).
-    assert link.sent[0] == maestro.set_speed(3, 6) + maestro.set_speed(4, 10) + maestro.set_speed(5, 13)
+    assert link.sent[0] == maestro.set_speed(3, 6) + maestro.set_speed(4, 10) + maestro.set_speed(
+        5, 13
+    )
     link.arm()  # no pulse known: every joint goes home
-    assert link.sent[-1] == maestro.set_target(3, 1000) + maestro.set_target(4, 1500) + maestro.set_target(5, 1000)
+    assert link.sent[-1] == maestro.set_target(3, 1000) + maestro.set_target(
+        4, 1500
+    ) + maestro.set_target(5, 1000)
     clock.sleep(0.1)
     assert link.move_to({"shoulder": 90}) == {"shoulder": 3.0}  # 30 deg/s for 0.1 s
     assert link.sent[-1] == maestro.set_target(3, 1000 + 3 * 500 / 90)
@@ -109,7 +117,9 @@ def test_angles_are_clamped_and_said_and_unknown_joints_refused():
         "elbow: 500 is beyond 0..135 degrees, clamped to 135",
         "gripper: -20 is beyond 0..90 degrees, clamped to 0",
     ]
-    with pytest.raises(ServantError, match="no joint named 'wrist'; the arm's joints are: shoulder, elbow, gripper"):
+    with pytest.raises(
+        ServantError, match="no joint named 'wrist'; the arm's joints are: shoulder, elbow, gripper"
+    ):
         link.move_to({"wrist": 10})
     with pytest.raises(ServantError, match="not an angle"):
         link.move_to({"elbow": float("nan")})

@@ -48,14 +48,16 @@ def test_no_command_leaves_the_limits_or_outruns_the_speed(protocol, events):
         decoder.feed(data)
         sent.append((clock(), commanded_pulses(decoder)))
 
-    link = ServoLink.open(None, protocol, JOINTS, dry_run=True, clock=clock, sleep=clock.sleep, on_bytes=on_bytes)
+    link = ServoLink.open(
+        None, protocol, JOINTS, dry_run=True, clock=clock, sleep=clock.sleep, on_bytes=on_bytes
+    )
     link.arm()
     for pause, pose, steps in events:
         clock.sleep(pause)
         try:
             link.move_to(pose)
         except ServantError:
-            pass  # refused (unknown joint, not a number): refusing is safe, the check below still runs
+            pass  # refused (unknown joint, not a number): safe; the checks below still run
         for _ in range(steps):
             clock.sleep(0.03)
             link.step()

@@ -5,7 +5,13 @@ import json
 import pytest
 
 from servant_core.errors import ServantError
-from servant_core.settings import Joint, Settings, default_settings_path, load_settings, save_settings
+from servant_core.settings import (
+    Joint,
+    Settings,
+    default_settings_path,
+    load_settings,
+    save_settings,
+)
 
 
 def test_missing_file_gives_safe_defaults():
@@ -13,11 +19,17 @@ def test_missing_file_gives_safe_defaults():
     assert settings == Settings()
     assert [j.name for j in settings.joints] == ["shoulder", "elbow", "gripper"]
     assert settings.problems() == []
-    assert (settings.acoustic_window_s, settings.confirm_window_s, settings.pictures_needed) == (30.0, 20.0, 3)
+    assert (settings.acoustic_window_s, settings.confirm_window_s, settings.pictures_needed) == (
+        30.0,
+        20.0,
+        3,
+    )
 
 
 def test_round_trip_through_the_config_dir():
-    settings = Settings(serial_port="/dev/ttyACM0", protocol="firmata", camera=0, confidence_threshold=70.0)
+    settings = Settings(
+        serial_port="/dev/ttyACM0", protocol="firmata", camera=0, confidence_threshold=70.0
+    )
     settings.joints[0] = Joint("shoulder", 9, -10, 80, 900, 1600, 20, 0)
     path = save_settings(settings)
     assert path == default_settings_path()
@@ -33,7 +45,8 @@ def test_round_trip_through_the_config_dir():
         ('{"version": 99}', "newer than this Servant reads"),
         ('{"joints": [{"name": "x"}]}', "a joint is malformed"),
         (
-            '{"joints": [{"name": "x", "channel": 1, "min_angle": 90, "max_angle": 0, "min_pulse_us": 1000,'
+            '{"joints": [{"name": "x", "channel": 1, "min_angle": 90, "max_angle": 0,'
+            ' "min_pulse_us": 1000,'
             ' "max_pulse_us": 2000, "max_speed_deg_s": 10, "home_angle": 0}]}',
             "min_angle must be below max_angle",
         ),
