@@ -30,7 +30,9 @@ def test_probabilities_sum_to_one_and_favour_the_near_scene():
 
 def test_acoustic_recogniser_separates_two_tones_and_follows_sklearn_conventions():
     rate = 4000
-    windows = np.stack([tone(f, 1.0, rate, a) for f, a in [(300, 0.5), (300, 0.45), (1500, 0.5), (1500, 0.45)]])
+    windows = np.stack(
+        [tone(f, 1.0, rate, a) for f, a in [(300, 0.5), (300, 0.45), (1500, 0.5), (1500, 0.45)]]
+    )
     model = PaperAcousticRecogniser(rate=rate, window_seconds=1.0, random_state=0)
     with pytest.raises(NotFittedError):
         model.predict(model.featurize(windows))
@@ -38,7 +40,9 @@ def test_acoustic_recogniser_separates_two_tones_and_follows_sklearn_conventions
     assert model.fit(X, ["low", "low", "high", "high"]) is model
     assert model.predict(X).tolist() == ["low", "low", "high", "high"]
     assert model.scenes_ == ["high", "low"]
-    again = PaperAcousticRecogniser(rate=rate, window_seconds=1.0, random_state=0).fit(X, ["low", "low", "high", "high"])
+    again = PaperAcousticRecogniser(rate=rate, window_seconds=1.0, random_state=0).fit(
+        X, ["low", "low", "high", "high"]
+    )
     assert np.array_equal(again.centres_, model.centres_)
     # eq. 1 against the nearest centroid, computed by hand
     nearest = np.min(np.linalg.norm(X[:, None, :] - model.centres_[None], axis=2), axis=1)

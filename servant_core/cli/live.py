@@ -1,0 +1,143 @@
+"""`servant run` (live devices) and `servant demo` (the synthesised walk), headless.
+
+They print the paper's terminal lines ("CoffeeScene detected") with their confidences, and what
+was heard and seen, as it happens; `--json` prints one JSON object per event instead. They stop
+on Ctrl-C or after `--duration` seconds of engine time. Without `--headless` the `servant` console
+script opens the terminal application instead (servant_tui intercepts these commands); if it does
+not, they run headless.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from typing import Any
+
+from servant_core.engine import Engine, LiveSettings, build_demo_engine, build_live_engine
+from servant_core.events import (
+    AcousticPrediction,
+    ArmState,
+    Decision,
+    DeviceStatus,
+    ErrorEvent,
+    Event,
+    UnknownScene,
+    VisualPrediction,
+)
+
+
+def register(subparsers: Any) -> None:
+    run = subparsers.add_parser(
+        "run", help="recognise scenes from the live microphone and camera", description=__doc__
+    )
+    run.add_argument("--model", help="model file from `servant train` (default: senses only)")
+    run.add_argument("--mic", help="input device index or name (default: the system's default)")
+    run.add_argument("--rate", type=int, help="sample rate in Hz (default: the device's own)")
+    run.add_argument("--no-mic", action="store_true", help="do not listen")
+    run.add_argument("--camera", default="0", help="camera index, video file or image pattern")
+    run.add_argument("--no-camera", action="store_true", help="do not look")
+    run.add_argument("--list-devices", action="store_true", help="list input devices and exit")
+    _common(run)
+    run.set_defaults(handler=run_live)
+
+    demo = subparsers.add_parser(
+        "demo",
+        help="the built-in demo scenes (no microphone or camera needed)",
+        description=__doc__,
+    )
+    demo.add_argument("--seed", type=int, default=0, help="seed of the synthesised scenes")
+    demo.add_argument(
+        "--fast", action="store_true", help="as fast as possible, on a simulated clock"
+    )
+    _common(demo)
+    demo.set_defaults(handler=run_demo)
+
+
+def _common(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--headless", action="store_true", help="print lines, no terminal UI")
+    parser.add_argument("--duration", type=float, help="stop after this many seconds")
+    parser.add_argument("--json", action="store_true", help="one JSON object per event")
+
+
+def run_live(args: argparse.Namespace) -> int:
+    if args.list_devices:
+        from servant_core.capture.microphone import list_input_devices
+
+        for device in list_input_devices():
+            mark = "*" if device.is_default else " "
+            rate = f"{device.channels} ch, {device.default_rate} Hz"
+            print(f"{mark} {device.index:3d}  {device.name}  ({rate})")
+        return 0
+    settings = LiveSettings(
+        model=args.model,
+        microphone=args.mic,
+        rate=args.rate,
+        use_microphone=not args.no_mic,
+        camera=None if args.no_camera else args.camera,
+    )
+    return _run(build_live_engine(settings), args)
+
+
+def run_demo(args: argparse.Namespace) -> int:
+    engine = build_demo_engine(args.seed, realtime=not args.fast)
+    if args.fast:
+        engine.subscribe(_printer(args.json))
+        engine.run_until(args.duration if args.duration is not None else 95.0)
+        return 0
+    return _run(engine, args)
+
+
+def _run(engine: Engine, args: argparse.Namespace) -> int:
+    if not args.headless:
+        print("servant: the terminal UI is not attached here; running headless", file=sys.stderr)
+    engine.subscribe(_printer(args.json))
+    engine.start()
+    try:
+        while engine.running and (args.duration is None or engine.clock() < args.duration):
+            time.sleep(0.05)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        engine.stop()
+    return 0
+
+
+def _printer(as_json: bool) -> Any:
+    def show(event: Event) -> None:
+        text = _event_json(event) if as_json else _event_line(event)
+        if text is not None:
+            print(text, flush=True)
+
+    return show
+
+
+def _event_line(event: Event) -> str | None:
+    """The line a person reads for an event, or None for events too frequent to print."""
+    at = f"[{event.t:7.2f}]"
+    if isinstance(event, Decision):
+        return f"{at} {event.line}  confidence {event.confidence:.3f}"
+    if isinstance(event, AcousticPrediction):
+        scene = event.scene or "an unknown place"
+        return f"{at} heard {scene}  acoustic confidence {event.confidence:.1f}"
+    if isinstance(event, VisualPrediction):
+        scene = event.scene or "an unknown place"
+        return f"{at} saw {scene}  visual confidence {event.confidence:.1f}"
+    if isinstance(event, UnknownScene):
+        return f"{at} unknown {event.sense} ({event.window_id}), nearest: {event.nearest_scene}"
+    if isinstance(event, DeviceStatus):
+        return f"{at} {event.device} {'ok' if event.ok else 'PROBLEM'}: {event.message}"
+    if isinstance(event, ErrorEvent):
+        return f"{at} error: {event.message}"
+    if isinstance(event, ArmState):
+        return f"{at} arm {'armed' if event.armed else 'disarmed'} {event.angles}"
+    return None
+
+
+def _event_json(event: Event) -> str | None:
+    if _event_line(event) is None:
+        return None
+    payload = {"event": type(event).__name__, **dataclasses.asdict(event)}
+    return json.dumps(payload, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v))

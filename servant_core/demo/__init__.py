@@ -1,0 +1,1 @@
+"""The built-in demo: scenes synthesised by Servant's own code, so `servant demo` runs anywhere."""

@@ -1,0 +1,151 @@
+"""The demo's scenes and its walk: a coffee shop, a basketball gym and a street, all synthesised.
+
+Everything is deterministic by seed: training windows and pictures come from
+`numpy.random.default_rng([seed, TRAIN, ...])`, the walk's windows and pictures from
+`default_rng([seed, WALK, ...])`, so training and walk never share a sound or a picture.
+
+The demo's audio runs at `DEMO_RATE` (16 kHz), and its paper recogniser is trained at that rate:
+the paper's raw-FFT K-Means on 5 s windows at 44.1 kHz would make start-up take far longer for
+no gain on synthesised sound. The paper's method is otherwise unchanged.
+
+The walk (`WALK`, 95 s, then again): the coffee shop, the gym, then a street heard while the camera
+still shows the café (a mismatch that ends in "No scene detected" after the paper's 30 s), then
+the street. The camera turns to a new place one window (5 s) after the sound changes: the paper's
+policy judges a window after it ends, so each clean change of place confirms at once.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from servant_core.audio import DEFAULT_WINDOW_SECONDS
+from servant_core.capture.replay import Clip, PacedAudio
+from servant_core.demo.audio_synth import DEMO_RATE, SCENE_SOUNDS
+from servant_core.demo.picture_synth import SCENE_PICTURES
+from servant_core.recognisers.paper import PaperAcousticRecogniser, PaperVisualRecogniser
+
+SCENES = ("coffee", "gym", "street")
+TRAIN, WALK_STREAM = 1, 2  # the first seed word after the user's seed: which stream of randomness
+
+
+@dataclass(frozen=True)
+class Segment:
+    sound: str  # the scene heard
+    sight: str  # the scene the camera shows
+    seconds: float
+    note: str
+
+
+WALK = (
+    Segment("coffee", "coffee", 20.0, "in the coffee shop"),
+    Segment("gym", "gym", 20.0, "on the basketball court"),
+    Segment(
+        "street", "coffee", 35.0, "outside, still looking into the café: sound and sight disagree"
+    ),
+    Segment("street", "street", 20.0, "walking down the street"),
+)
+CAMERA_LAG_S = DEFAULT_WINDOW_SECONDS
+
+
+def walk_length(walk: tuple[Segment, ...] = WALK) -> float:
+    return sum(s.seconds for s in walk)
+
+
+def segment_at(t: float, walk: tuple[Segment, ...] = WALK) -> Segment:
+    """The segment of the (endlessly repeated) walk at time `t` seconds; before 0, the first."""
+    t = max(0.0, t) % walk_length(walk)
+    for segment in walk:
+        if t < segment.seconds:
+            return segment
+        t -= segment.seconds
+    return walk[-1]
+
+
+def synth_window(
+    scene: str, rng: np.random.Generator, seconds: float = DEFAULT_WINDOW_SECONDS
+) -> np.ndarray:
+    return SCENE_SOUNDS[scene](rng, seconds, DEMO_RATE)
+
+
+def synth_picture(scene: str, rng: np.random.Generator) -> np.ndarray:
+    return SCENE_PICTURES[scene](rng)
+
+
+def training_set(
+    seed: int = 0, windows_per_scene: int = 6, pictures_per_scene: int = 6
+) -> tuple[np.ndarray, list[str], list[np.ndarray], list[str]]:
+    """(windows (n, samples) at DEMO_RATE, their scenes, pictures, their scenes)."""
+    windows, window_scenes, pictures, picture_scenes = [], [], [], []
+    for s, scene in enumerate(SCENES):
+        for i in range(windows_per_scene):
+            windows.append(synth_window(scene, np.random.default_rng([seed, TRAIN, s, 0, i])))
+            window_scenes.append(scene)
+        for i in range(pictures_per_scene):
+            pictures.append(synth_picture(scene, np.random.default_rng([seed, TRAIN, s, 1, i])))
+            picture_scenes.append(scene)
+    return np.stack(windows), window_scenes, pictures, picture_scenes
+
+
+def train_demo_recognisers(
+    seed: int = 0, windows_per_scene: int = 6, pictures_per_scene: int = 6
+) -> tuple[PaperAcousticRecogniser, PaperVisualRecogniser]:
+    """The paper's two recognisers, fitted on freshly synthesised scenes (a second or two)."""
+    windows, window_scenes, pictures, picture_scenes = training_set(
+        seed, windows_per_scene, pictures_per_scene
+    )
+    acoustic = PaperAcousticRecogniser(rate=DEMO_RATE, random_state=seed)
+    acoustic.fit(acoustic.featurize(windows), window_scenes)
+    visual = PaperVisualRecogniser(random_state=seed)
+    visual.fit(visual.featurize(pictures), picture_scenes)
+    return acoustic, visual
+
+
+def walk_clips(seed: int = 0, walk: tuple[Segment, ...] = WALK) -> Iterator[Clip]:
+    """The walk's sound, window by window, forever; window k is seeded by (seed, k)."""
+    for k in itertools.count():
+        scene = segment_at(k * DEFAULT_WINDOW_SECONDS, walk).sound
+        rng = np.random.default_rng([seed, WALK_STREAM, 0, k])
+        yield Clip(scene, synth_window(scene, rng))
+
+
+def demo_audio(seed: int = 0, *, realtime: bool = True, clock=None) -> PacedAudio:
+    """The walk's sound as an audio source (at real speed, or as fast as possible on `clock`)."""
+    return PacedAudio(
+        walk_clips(seed), DEMO_RATE, realtime=realtime, clock=clock, name="demo sound"
+    )
+
+
+class DemoCamera:
+    """A frame source showing the walk's place at the engine's time `clock()`.
+
+    A picture depends only on the seed and the time (to 0.1 s), so a run on a `ManualClock` shows
+    the same pictures every time.
+    """
+
+    def __init__(
+        self, clock: Callable[[], float], seed: int = 0, walk: tuple[Segment, ...] = WALK
+    ) -> None:
+        self.name = "demo camera"
+        self.clock = clock
+        self.seed = seed
+        self.walk = walk
+
+    def open(self) -> None:
+        pass
+
+    def read(self) -> np.ndarray:
+        t = self.clock()
+        scene = (
+            segment_at(t - CAMERA_LAG_S, self.walk).sight
+            if t >= CAMERA_LAG_S
+            else self.walk[0].sight
+        )
+        rng = np.random.default_rng([self.seed, WALK_STREAM, 1, int(round(t * 10))])
+        return synth_picture(scene, rng)
+
+    def close(self) -> None:
+        pass

@@ -1,0 +1,733 @@
+"""The engine: owns the senses, the recognisers, the fusion policy and the arm; emits events.
+
+One sense thread does the work. It takes audio blocks from the audio source into a ring buffer,
+makes a spectrum frame ~30 times per second of audio, cuts consecutive windows (5 s) and predicts
+each, and — between blocks — lets the fusion policy tick and grabs a picture whenever the policy
+wants one. Doing it all on one thread keeps the order of events a pure function of the input: a
+demo run on a `ManualClock` gives the same events on every machine. (The microphone's PortAudio
+callback runs on PortAudio's own thread and only queues blocks.)
+
+Subscribers are called on the sense thread (or on the thread calling `label_unknown`, `retrain`,
+`arm`…): they must be quick and must not call back into `start`/`stop`. A front end posts the
+event to its own loop.
+
+Faults (a device gone, no frame, a corrupt replay file, a prediction that fails) are reported once
+as `DeviceStatus(ok=False)` or `ErrorEvent`, and the engine carries on with the other senses,
+reopening a failed device every `reopen_seconds`.
+
+Factories for front ends: `build_demo_engine` (the synthesised walk) and `build_live_engine`
+(microphone, camera, a trained model file).
+"""
+
+from __future__ import annotations
+
+import copy
+import logging
+import re
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Callable, Mapping
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from servant_core.audio import DEFAULT_RATE, DEFAULT_WINDOW_SECONDS, resample, write_wav
+from servant_core.capture.ring import RingBuffer
+from servant_core.capture.source import AudioSource, FrameSource, ManualClock, MonotonicClock
+from servant_core.errors import ServantError
+from servant_core.events import (
+    AcousticPrediction,
+    ArmState,
+    Decision,
+    DeviceStatus,
+    ErrorEvent,
+    Event,
+    Palette,
+    SpectrumFrame,
+    UnknownScene,
+    VisualPrediction,
+)
+from servant_core.features.palette import dominant_colours
+from servant_core.fusion import FusionPolicy, SequentialFusion
+from servant_core.library import SceneLibrary, featurize_recordings, read_pictures
+from servant_core.recognisers import UNKNOWN, Recogniser
+from servant_core.storage import atomic_write_bytes, data_dir
+
+log = logging.getLogger(__name__)
+
+Subscriber = Callable[[Event], None]
+Pose = Mapping[str, float]
+
+SPECTRUM_SIZE = 2048
+SPECTRUM_FPS = 30.0
+RING_SECONDS = 30.0  # what the ring holds: a window being cut while teach mode records 5 s
+UNKNOWN_KEPT = 16  # unknown windows/pictures kept for the user to label, the oldest dropped first
+
+
+def spectrum_db(samples: np.ndarray, rate: int) -> tuple[np.ndarray, np.ndarray]:
+    """(frequencies in Hz, magnitude in dB re full scale) of a Hann-windowed stretch of samples.
+
+    A full-scale sine reads 0 dB; silence is floored at −120 dB.
+    """
+    n = len(samples)
+    hann = np.hanning(n)
+    magnitude = np.abs(np.fft.rfft(samples * hann)) * 2.0 / hann.sum()
+    return np.fft.rfftfreq(n, 1.0 / rate), 20.0 * np.log10(np.maximum(magnitude, 1e-6))
+
+
+@dataclass
+class _Kept:
+    """An unknown window or picture, held until the user labels it."""
+
+    sense: str  # "audio" | "image"
+    data: np.ndarray
+    rate: int = 0
+
+
+class Engine:
+    """Senses → recognisers → fusion → decisions (→ poses → arm), as events to subscribers.
+
+    Parameters
+    - `audio`, `camera`: an `AudioSource` / `FrameSource` (see `servant_core.capture.source`),
+      or None for a sense that is absent.
+    - `acoustic`, `visual`: fitted recognisers (see `servant_core.recognisers.base`), or None.
+    - `fusion`: a `FusionPolicy` (default: the paper's `SequentialFusion`).
+    - `clock`: the engine's time in seconds (default: monotonic seconds since construction).
+    - `window_seconds`: the window the acoustic recogniser judges (default: its own, else 5 s).
+    - `library_root`: where `label_unknown` writes (default `data_dir()/"library"`).
+
+    Public API used by front ends: `subscribe`, `start`, `stop`, `running`, `join`, `run_until`,
+    `status`, `audio_rate`, `record_window`, `take_picture`, `latest_scores`, `retrain`,
+    `retrain_needed`, `label_unknown`, `set_arm`, `arm`, `disarm`, `set_action_learner`.
+    """
+
+    def __init__(
+        self,
+        *,
+        audio: AudioSource | None = None,
+        camera: FrameSource | None = None,
+        acoustic: Recogniser | None = None,
+        visual: Recogniser | None = None,
+        fusion: FusionPolicy | None = None,
+        clock: Callable[[], float] | None = None,
+        window_seconds: float | None = None,
+        spectrum_fps: float = SPECTRUM_FPS,
+        spectrum_size: int = SPECTRUM_SIZE,
+        reopen_seconds: float = 2.0,
+        library_root: str | Path | None = None,
+    ) -> None:
+        self.audio = audio
+        self.camera = camera
+        self.acoustic = acoustic
+        self.visual = visual
+        self.fusion: FusionPolicy = fusion if fusion is not None else SequentialFusion()
+        self.clock: Callable[[], float] = clock or MonotonicClock()
+        self.window_seconds = float(
+            window_seconds or getattr(acoustic, "window_seconds", None) or DEFAULT_WINDOW_SECONDS
+        )
+        self.spectrum_fps = spectrum_fps
+        self.spectrum_size = spectrum_size
+        self.reopen_seconds = reopen_seconds
+        self.library_root = Path(library_root) if library_root else None
+        self.retrain_needed = False
+
+        self._subscribers: list[Subscriber] = []
+        self._subscribers_lock = threading.Lock()
+        self._status: dict[str, DeviceStatus] = {}
+        self._reported_errors: set[str] = set()
+        self._lock = threading.RLock()  # models, fusion, scores, unknowns
+        self._camera_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._finished = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._arm_pool: ThreadPoolExecutor | None = None
+        self._link: Any = None
+        self._pose_for: Callable[[str], Pose | None] | None = None
+
+        self._opened = False
+        self._ring: RingBuffer | None = None
+        self._audio_ok = False
+        self._audio_retry_at = 0.0
+        self._camera_ok = False
+        self._camera_retry_at = 0.0
+        self._next_window_end = 0
+        self._next_spectrum_at = 0
+        self._scores: dict[str, dict[str, float]] = {"acoustic": {}, "visual": {}}
+        self._unknown: OrderedDict[str, _Kept] = OrderedDict()
+        self._unknown_count = 0
+
+    # --- subscribers and status -------------------------------------------------------------
+
+    def subscribe(self, callback: Subscriber) -> Callable[[], None]:
+        """Call `callback(event)` for every event from now on; returns the way to unsubscribe."""
+        with self._subscribers_lock:
+            self._subscribers.append(callback)
+
+        def unsubscribe() -> None:
+            with self._subscribers_lock:
+                if callback in self._subscribers:
+                    self._subscribers.remove(callback)
+
+        return unsubscribe
+
+    def _emit(self, event: Event) -> None:
+        with self._subscribers_lock:
+            subscribers = list(self._subscribers)
+        for callback in subscribers:
+            try:
+                callback(event)
+            except Exception:  # a broken subscriber must not stop the senses
+                log.exception("event subscriber %r failed", callback)
+
+    @property
+    def status(self) -> dict[str, DeviceStatus]:
+        """The latest status of each device ("microphone", "camera", "servo")."""
+        return dict(self._status)
+
+    def _report(self, device: str, ok: bool, message: str) -> None:
+        """Emit a DeviceStatus when a device's state changes: a fault is said once, however it then
+        fails to reopen, until the device works again."""
+        previous = self._status.get(device)
+        if previous is not None and previous.ok == ok and (previous.message == message or not ok):
+            return
+        status = DeviceStatus(self.clock(), device, ok, message)
+        self._status[device] = status
+        self._emit(status)
+
+    def _error(self, message: str) -> None:
+        """Emit an ErrorEvent the first time this message occurs."""
+        if message in self._reported_errors:
+            return
+        self._reported_errors.add(message)
+        self._emit(ErrorEvent(self.clock(), message))
+
+    # --- life cycle ---------------------------------------------------------------------------
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def start(self) -> None:
+        """Open the senses (a missing one is reported, not fatal) and start the sense thread."""
+        if self.running:
+            return
+        self._stop.clear()
+        self._finished.clear()
+        self._open_senses()
+        self._arm_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="servant-arm")
+        self._thread = threading.Thread(target=self._run, name="servant-senses", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop the sense thread, close the senses and wait for a pose being sent; idempotent."""
+        self._stop.set()
+        thread, self._thread = self._thread, None
+        if thread is not None:
+            thread.join()
+        self._close_senses()
+        pool, self._arm_pool = self._arm_pool, None
+        if pool is not None:
+            pool.shutdown(wait=True)
+
+    def join(self, timeout: float | None = None) -> bool:
+        """Wait until a finite audio source (a replay) has been played out; False on timeout."""
+        return self._finished.wait(timeout)
+
+    def run_until(self, t: float) -> None:
+        """Run the senses on the caller's thread until the engine's clock reaches `t` (or the audio
+        runs out). With a `ManualClock` this is fully deterministic; no thread is started."""
+        if self.running:
+            raise RuntimeError("run_until is for an engine that was not started")
+        if not self._opened:
+            self._open_senses()
+        while self.clock() < t and not self._finished.is_set():
+            self._step()
+
+    def __enter__(self) -> Engine:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def _open_senses(self) -> None:
+        self._opened = True
+        self._emit(self.fusion.state(self.clock()))
+        if self.audio is not None:
+            self._open_audio()
+        if self.camera is not None:
+            with self._camera_lock:
+                self._open_camera()
+
+    def _close_senses(self) -> None:
+        self._opened = False
+        if self.audio is not None:
+            self.audio.close()
+            self._audio_ok = False
+        if self.camera is not None:
+            with self._camera_lock:
+                self.camera.close()
+                self._camera_ok = False
+
+    def _open_audio(self) -> None:
+        assert self.audio is not None
+        try:
+            self.audio.open()
+        except ServantError as error:
+            self._audio_ok = False
+            self._audio_retry_at = self.clock() + self.reopen_seconds
+            self._report("microphone", False, str(error))
+            return
+        rate = self.audio.rate
+        if self._ring is None or self._ring.capacity != int(rate * RING_SECONDS):
+            self._ring = RingBuffer(int(rate * RING_SECONDS))
+        # Windows start afresh after (re)opening: never stitch audio from both sides of a gap.
+        self._next_window_end = self._ring.total + int(round(self.window_seconds * rate))
+        self._next_spectrum_at = self._ring.total
+        self._audio_ok = True
+        note = getattr(self.audio, "rate_note", None)
+        self._report("microphone", True, note or f"{self.audio.name}: listening at {rate} Hz")
+
+    def _open_camera(self) -> None:
+        assert self.camera is not None
+        try:
+            self.camera.open()
+        except ServantError as error:
+            self._camera_fault(error)
+            return
+        self._camera_ok = True
+        self._report("camera", True, f"{self.camera.name}: ready")
+
+    def _camera_fault(self, error: ServantError) -> None:
+        assert self.camera is not None
+        self.camera.close()
+        self._camera_ok = False
+        self._camera_retry_at = self.clock() + self.reopen_seconds
+        self._report("camera", False, str(error))
+
+    # --- the sense thread ---------------------------------------------------------------------
+
+    def _run(self) -> None:
+        try:
+            while not self._stop.is_set() and not self._finished.is_set():
+                self._step()
+        except Exception as exc:  # a bug must show, not silently stop the senses
+            log.exception("the sense thread failed")
+            self._error(f"engine: the sense thread stopped ({type(exc).__name__}: {exc})")
+
+    def _step(self, timeout: float = 0.05) -> None:
+        """One turn: take an audio block if one comes within `timeout`, then let fusion look."""
+        audio = self.audio
+        if audio is not None and self._audio_ok:
+            try:
+                block = audio.read(timeout)
+            except ServantError as error:
+                self._audio_fault(error)
+                block = None
+            if block is not None and len(block):
+                self._on_block(block)
+            elif audio.exhausted:
+                self._report("microphone", False, f"{audio.name}: finished")
+                self._finished.set()
+                return
+        else:
+            if isinstance(self.clock, ManualClock):
+                # Nothing moves a manual clock but the audio: without audio there is no time.
+                self._finished.set()
+                return
+            self._stop.wait(timeout)
+            if audio is not None and self.clock() >= self._audio_retry_at:
+                self._open_audio()
+        self._look()
+
+    def _audio_fault(self, error: ServantError) -> None:
+        """A live device that stopped is closed and reopened later; a replay skips the bad file."""
+        assert self.audio is not None
+        if not getattr(self.audio, "live", False):
+            self._error(str(error))
+            return
+        self._report("microphone", False, str(error))
+        self.audio.close()
+        self._audio_ok = False
+        self._audio_retry_at = self.clock() + self.reopen_seconds
+
+    def _on_block(self, block: np.ndarray) -> None:
+        assert self._ring is not None and self.audio is not None
+        ring, rate = self._ring, self.audio.rate
+        ring.append(block)
+        total = ring.total
+        if (
+            self.spectrum_fps > 0
+            and total >= self._next_spectrum_at
+            and total >= self.spectrum_size
+        ):
+            freqs, db = spectrum_db(ring.latest(self.spectrum_size), rate)
+            self._emit(SpectrumFrame(self.clock(), freqs, db))
+            hop = max(1, int(rate / self.spectrum_fps))
+            self._next_spectrum_at = (total // hop + 1) * hop
+        size = int(round(self.window_seconds * rate))
+        while total >= self._next_window_end:
+            end = self._next_window_end
+            self._next_window_end += size
+            self._guarded("acoustic prediction", self._on_window, ring.read(end - size, end), rate)
+
+    def _guarded(self, what: str, fn: Callable[..., None], *args: Any) -> None:
+        try:
+            fn(*args)
+        except ServantError as error:
+            self._error(str(error))
+        except Exception as exc:  # e.g. a model trained on another window length: say it, go on
+            log.debug("%s failed", what, exc_info=True)
+            self._error(f"{what} failed: {type(exc).__name__}: {exc}")
+
+    def _on_window(self, window: np.ndarray, rate: int) -> None:
+        with self._lock:
+            acoustic = self.acoustic
+        if acoustic is None:
+            return
+        t = self.clock()
+        model_rate = getattr(acoustic, "rate", rate)
+        X = acoustic.featurize(resample(window, rate, model_rate)[None, :])
+        scene, confidence, scores = _predict(acoustic, X)
+        with self._lock:
+            self._scores["acoustic"] = scores
+        known = scene != UNKNOWN
+        self._emit(AcousticPrediction(t, scene if known else None, confidence, scores))
+        if not known:
+            self._ask_label("audio", _Kept("audio", window, rate), scores, t)
+        with self._lock:
+            events = self.fusion.on_acoustic(scene if known else None, confidence, t)
+        self._handle(events)
+
+    def _look(self) -> None:
+        t = self.clock()
+        with self._lock:
+            events = self.fusion.tick(t)
+            wants = self.camera is not None and self.fusion.wants_picture(t)
+        self._handle(events)
+        if not wants:
+            return
+        with self._camera_lock:
+            frame = self._grab(t)
+        if frame is not None:
+            self._guarded("visual prediction", self._on_picture, frame, t)
+
+    def _grab(self, t: float) -> np.ndarray | None:
+        """A frame from the camera, reopening it if it failed a while ago; None if none."""
+        assert self.camera is not None
+        if not self._camera_ok:
+            if t < self._camera_retry_at:
+                return None
+            self._open_camera()
+            if not self._camera_ok:
+                return None
+        try:
+            frame = self.camera.read()
+        except ServantError as error:
+            self._camera_fault(error)
+            return None
+        self._report("camera", True, f"{self.camera.name}: ready")
+        return frame
+
+    def _on_picture(self, frame: np.ndarray, t: float) -> None:
+        colours, shares = dominant_colours(frame)
+        with self._lock:
+            visual = self.visual
+        if visual is None:
+            self._emit(Palette(t, colours, shares))
+            return
+        X = visual.featurize([frame])
+        scene, confidence, scores = _predict(visual, X)
+        known = scene != UNKNOWN
+        matched = visual.matched_palette(X)[0] if hasattr(visual, "matched_palette") else None
+        self._emit(Palette(t, colours, shares, scene if known else None, matched))
+        with self._lock:
+            self._scores["visual"] = scores
+        self._emit(VisualPrediction(t, scene if known else None, confidence, scores))
+        if not known:
+            self._ask_label("image", _Kept("image", frame), scores, t)
+        with self._lock:
+            events = self.fusion.on_visual(scene if known else None, confidence, t)
+        self._handle(events)
+
+    def _handle(self, events: list[Any]) -> None:
+        for event in events:
+            self._emit(event)
+            if isinstance(event, Decision) and event.scene is not None:
+                self._act(event.scene)
+
+    # --- actions and the arm ------------------------------------------------------------------
+
+    def set_action_learner(self, pose_for: Callable[[str], Pose | None] | None) -> None:
+        """Attach what turns a detected scene into a pose: any callable scene → {joint: degrees}
+        or None (e.g. the bound prediction method of the action learner). None detaches it."""
+        self._pose_for = pose_for
+
+    def set_arm(self, link: Any) -> None:
+        """Attach a servo link (`servant_core.servo.link`: `.arm()`, `.disarm()`, `.armed`,
+        `.move_to(pose)`, `.status()`), or None to detach it. The link enforces limits and rate."""
+        self._link = link
+        if link is None:
+            self._report("servo", False, "servo: no arm attached")
+        else:
+            self._report("servo", True, f"servo: {getattr(link, 'port', None) or 'link'} attached")
+            self._emit_arm_state()
+
+    def arm(self) -> None:
+        """Allow the arm to move (delegates to the link); ServantError if no arm is attached."""
+        self._require_link().arm()
+        self._emit_arm_state()
+
+    def disarm(self) -> None:
+        """Forbid the arm to move; does nothing when no arm is attached (safe to call always)."""
+        if self._link is not None:
+            self._link.disarm()
+            self._emit_arm_state()
+
+    def _require_link(self) -> Any:
+        if self._link is None:
+            raise ServantError("servo: no arm attached; connect one with `servant servo` first")
+        return self._link
+
+    def _emit_arm_state(self) -> None:
+        state = self._link.status() if self._link is not None else None
+        if isinstance(state, ArmState):
+            self._emit(state)
+
+    def _act(self, scene: str) -> None:
+        link, pose_for, pool = self._link, self._pose_for, self._arm_pool
+        if link is None or pose_for is None or not link.armed:
+            return
+        try:
+            pose = pose_for(scene)
+        except ServantError as error:
+            self._error(str(error))
+            return
+        if pose is None:
+            return
+        if pool is None:  # run_until: no thread pool, send on this thread
+            self._move(link, dict(pose))
+        else:
+            pool.submit(self._move, link, dict(pose))
+
+    def _move(self, link: Any, pose: dict[str, float]) -> None:
+        # On its own thread: a rate-limited move takes seconds and must not hold up the senses.
+        try:
+            if link.armed:
+                link.move_to(pose)
+        except ServantError as error:
+            self._report("servo", False, str(error))
+        except Exception as exc:
+            self._report("servo", False, f"servo: move failed ({type(exc).__name__}: {exc})")
+        self._emit_arm_state()
+
+    # --- what the front end asks for ----------------------------------------------------------
+
+    @property
+    def audio_rate(self) -> int:
+        """The rate of the audio source (what `record_window` returns); 0 without audio."""
+        return self.audio.rate if self.audio is not None and self._audio_ok else 0
+
+    def record_window(
+        self, seconds: float = DEFAULT_WINDOW_SECONDS, timeout: float | None = None
+    ) -> np.ndarray:
+        """Record the next `seconds` of audio from now (blocks until they have arrived).
+
+        Returns mono float32 at `audio_rate`. Raises ServantError without a working audio source
+        or if the audio does not arrive within `timeout` (default: twice `seconds` plus 2 s).
+        """
+        ring = self._ring
+        if ring is None or not self._audio_ok or self.audio is None:
+            raise ServantError("microphone: no sound to record; check the microphone (see status)")
+        if not self.running:
+            raise ServantError("engine: not running; start it before recording")
+        count = int(round(seconds * self.audio.rate))
+        if count > ring.capacity:
+            raise ServantError(f"engine: cannot record more than {RING_SECONDS:g} s at once")
+        end = ring.total + count
+        if not ring.wait_for(end, timeout if timeout is not None else 2 * seconds + 2):
+            raise ServantError(f"{self.audio.name}: the sound stopped while recording; try again")
+        return ring.read(end - count, end)
+
+    def take_picture(self) -> np.ndarray:
+        """A picture from the camera now (BGR uint8); ServantError if there is none."""
+        if self.camera is None:
+            raise ServantError("camera: none in use; start with a camera to take pictures")
+        with self._camera_lock:
+            frame = self._grab(self.clock())
+        if frame is None:
+            message = self._status.get("camera")
+            raise ServantError(message.message if message else "camera: no picture")
+        return frame
+
+    def latest_scores(self) -> dict[str, dict[str, float]]:
+        """The last per-scene scores: {"acoustic": {scene: p}, "visual": {scene: p}}."""
+        with self._lock:
+            return {sense: dict(scores) for sense, scores in self._scores.items()}
+
+    def retrain(self, library: SceneLibrary | str | Path) -> None:
+        """Refit copies of both recognisers on a scene library, then swap them in (the senses keep
+        running on the old ones meanwhile). Unreadable files are reported and skipped."""
+        if not isinstance(library, SceneLibrary):
+            library = SceneLibrary.scan(library)
+        with self._lock:
+            acoustic, visual = self.acoustic, self.visual
+        new_acoustic = new_visual = None
+        if acoustic is not None and library.recordings:
+            model = copy.deepcopy(acoustic)
+            windows = featurize_recordings(
+                library.recordings,
+                model.featurize,
+                rate=getattr(model, "rate", DEFAULT_RATE),
+                seconds=self.window_seconds,
+                on_error=lambda e: self._error(str(e)),
+            )
+            new_acoustic = model.fit(windows.features, list(windows.scenes))
+        if visual is not None and library.pictures:
+            model = copy.deepcopy(visual)
+            images, kept = read_pictures(library.pictures, on_error=lambda e: self._error(str(e)))
+            if images:
+                new_visual = model.fit(model.featurize(images), [p.scene for p in kept])
+        with self._lock:
+            self.acoustic = new_acoustic or self.acoustic
+            self.visual = new_visual or self.visual
+            self.retrain_needed = False
+
+    def _ask_label(self, sense: str, kept: _Kept, scores: dict[str, float], t: float) -> None:
+        with self._lock:
+            self._unknown_count += 1
+            window_id = f"{sense}-{self._unknown_count}"
+            self._unknown[window_id] = kept
+            while len(self._unknown) > UNKNOWN_KEPT:
+                self._unknown.popitem(last=False)
+        nearest = max(scores, key=lambda s: scores[s]) if scores else None
+        self._emit(UnknownScene(t, sense, nearest, window_id))
+
+    def label_unknown(self, window_id: str, scene: str) -> Path:
+        """Give the scene the user named to an unknown window or picture (from `UnknownScene`).
+
+        It is written into the library (`library_root/<scene>/`, atomically), then folded into the
+        recogniser if it has `fold_in(X, scenes)`; otherwise `retrain_needed` becomes True.
+        Returns the file written.
+        """
+        scene = scene.strip()
+        if not re.fullmatch(r"[^/\\.][^/\\]*", scene):
+            raise ServantError(f"scene name {scene!r}: use a plain folder name, e.g. 'kitchen'")
+        with self._lock:
+            kept = self._unknown.pop(window_id, None)
+        if kept is None:
+            raise ServantError(
+                f"{window_id}: no such unknown window (only the last {UNKNOWN_KEPT} are kept)"
+            )
+        root = self.library_root or data_dir() / "library"
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        if kept.sense == "audio":
+            path = write_wav(root / scene / f"heard-{stamp}-{window_id}.wav", kept.data, kept.rate)
+        else:
+            ok, png = cv2.imencode(".png", kept.data)
+            if not ok:
+                raise ServantError(f"{window_id}: the picture could not be encoded as PNG")
+            path = atomic_write_bytes(root / scene / f"seen-{stamp}-{window_id}.png", png.tobytes())
+        with self._lock:
+            recogniser = self.acoustic if kept.sense == "audio" else self.visual
+            if recogniser is not None and hasattr(recogniser, "fold_in"):
+                if kept.sense == "audio":
+                    samples = resample(kept.data, kept.rate, getattr(recogniser, "rate", kept.rate))
+                    X = recogniser.featurize(samples[None, :])
+                else:
+                    X = recogniser.featurize([kept.data])
+                recogniser.fold_in(X, [scene])
+            else:
+                self.retrain_needed = True
+        return path
+
+
+def _predict(recogniser: Recogniser, X: np.ndarray) -> tuple[str, float, dict[str, float]]:
+    """(scene or UNKNOWN, confidence, {scene: probability}) for a single featurized row."""
+    scene = str(recogniser.predict(X)[0])
+    confidence = float(recogniser.confidence(X)[0])
+    probabilities = recogniser.predict_proba(X)[0]
+    return (
+        scene,
+        confidence,
+        {s: float(p) for s, p in zip(recogniser.scenes_, probabilities, strict=True)},
+    )
+
+
+# --- factories for front ends ---------------------------------------------------------------
+
+
+def build_demo_engine(
+    seed: int = 0,
+    clock: Callable[[], float] | None = None,
+    realtime: bool = True,
+    fusion: FusionPolicy | None = None,
+    library_root: str | Path | None = None,
+) -> Engine:
+    """The built-in demo: the paper's recognisers trained on freshly synthesised scenes (a couple
+    of seconds), then the synthesised walk (see `servant_core.demo.scenes`).
+
+    `realtime=False` runs the walk as fast as possible on a `ManualClock` (pass your own to read
+    it), so events — times included — are the same on every run: use `engine.run_until(t)` for a
+    thread-free deterministic run, or `start()` to stream them. With `realtime=True` the walk
+    plays at real speed on `clock` (default: monotonic time).
+    """
+    from servant_core.demo.scenes import DemoCamera, demo_audio, train_demo_recognisers
+
+    if not realtime:
+        clock = clock if isinstance(clock, ManualClock) else ManualClock()
+    clock = clock or MonotonicClock()
+    acoustic, visual = train_demo_recognisers(seed)
+    audio = demo_audio(seed, realtime=realtime, clock=clock if not realtime else None)
+    return Engine(
+        audio=audio,
+        camera=DemoCamera(clock, seed),
+        acoustic=acoustic,
+        visual=visual,
+        fusion=fusion,
+        clock=clock,
+        library_root=library_root,
+    )
+
+
+@dataclass(frozen=True)
+class LiveSettings:
+    """What `build_live_engine` needs; every field has a sensible default.
+
+    `model`: a model file from `servant train` (None: no recognisers, senses only).
+    `microphone`: device index or name (None: the default input); `rate`: None for its default.
+    `camera`: index, video file or image-sequence pattern (None: no camera).
+    """
+
+    model: str | Path | None = None
+    microphone: int | str | None = None
+    rate: int | None = None
+    use_microphone: bool = True
+    camera: int | str | None = 0
+    library_root: str | Path | None = None
+
+
+def build_live_engine(
+    settings: LiveSettings | None = None, fusion: FusionPolicy | None = None
+) -> Engine:
+    """An engine on the live devices. A missing microphone or camera is reported when the engine
+    starts (`DeviceStatus(ok=False)`), never raised: the engine runs on what there is."""
+    from servant_core.capture.camera import Camera
+    from servant_core.capture.microphone import Microphone
+    from servant_core.modelfile import load_model
+
+    settings = settings or LiveSettings()
+    models = load_model(settings.model) if settings.model else {}
+    return Engine(
+        audio=Microphone(settings.microphone, settings.rate) if settings.use_microphone else None,
+        camera=Camera(settings.camera) if settings.camera is not None else None,
+        acoustic=models.get("acoustic"),
+        visual=models.get("visual"),
+        fusion=fusion,
+        library_root=settings.library_root,
+    )
