@@ -123,6 +123,14 @@ def test_learner_refuses_untaught_scenes_and_low_confidence(learner):
         ActionLearner().predict(scores, "coffee", 100)
 
 
+def test_pose_for_is_a_pose_or_a_reason(learner):
+    assert learner.pose_for("gym") == pytest.approx({"shoulder": 10.0}, abs=0.5)
+    with pytest.raises(ServantError, match="arm: I was never taught what to do in 'street'"):
+        learner.pose_for("street")
+    with pytest.raises(ServantError, match="under the threshold"):
+        learner.pose_for("coffee", confidence=10.0)
+
+
 def test_learner_uses_the_perceived_scores():
     records = [
         TeachRecord("coffee", perceived("coffee", 0.9), {"shoulder": 60.0}, 0, "perceived"),

@@ -104,14 +104,14 @@ def test_dry_run_shows_the_exact_bytes():
         4, 1500
     ) + maestro.set_target(5, 1000)
     clock.sleep(0.1)
-    assert link.move_to({"shoulder": 90}) == {"shoulder": 3.0}  # 30 deg/s for 0.1 s
+    assert link.move_to({"shoulder": 90}, wait=False) == {"shoulder": 3.0}  # 30 deg/s for 0.1 s
     assert link.sent[-1] == maestro.set_target(3, 1000 + 3 * 500 / 90)
 
 
 def test_angles_are_clamped_and_said_and_unknown_joints_refused():
     link, clock = dry_link()
     link.arm()
-    link.move_to({"elbow": 500, "gripper": -20})
+    link.move_to({"elbow": 500, "gripper": -20}, wait=False)
     assert link.goal == {"elbow": 135.0, "gripper": 0.0}
     assert link.notes == [
         "elbow: 500 is beyond 0..135 degrees, clamped to 135",
@@ -130,7 +130,8 @@ def test_rate_limit_never_jumps_after_a_pause():
     link, clock = dry_link()
     link.arm()
     clock.sleep(60)  # a long pause must not turn into one big step
-    assert link.move_to({"shoulder": 90}) == {"shoulder": pytest.approx(30 * MAX_STEP_S)}
+    first = link.move_to({"shoulder": 90}, wait=False)
+    assert first == {"shoulder": pytest.approx(30 * MAX_STEP_S)}
     clock.sleep(0.05)
     assert link.step() == {"shoulder": pytest.approx(30 * MAX_STEP_S + 1.5)}
     assert link.settle()["shoulder"] == 90.0
@@ -147,7 +148,6 @@ def test_link_loss_disarms_and_reconnects_when_the_port_comes_back(tmp_path):
         emu.stop()
         with pytest.raises(ServantError, match="was lost.*the arm is disarmed"):
             link.move_to({"shoulder": 10})
-            link.read_positions()
         state = link.status()
         assert not state.armed and not state.connected
         emu, _ = start_emulator("maestro", link=stable)
@@ -158,6 +158,21 @@ def test_link_loss_disarms_and_reconnects_when_the_port_comes_back(tmp_path):
     finally:
         link.close()
         emu.stop()
+
+
+def test_a_blocking_move_stops_when_disarmed():
+    link, clock = dry_link()
+    link.arm()
+
+    def sleep(seconds):
+        clock.sleep(seconds)
+        if clock() > 1.0:
+            link.disarm()  # as the user (or a lost port) would, from another thread
+
+    link.sleep = sleep
+    reached = link.move_to({"shoulder": 90})
+    assert 25 < reached["shoulder"] < 35  # about 1 s at 30 deg/s, then it stopped
+    assert not link.armed
 
 
 def test_joints_a_protocol_cannot_drive_are_refused_before_opening():

@@ -26,7 +26,7 @@ import numpy as np
 from sklearn.exceptions import ConvergenceWarning, NotFittedError
 from sklearn.neural_network import MLPRegressor
 
-from servant_core.actions.records import SENSES, TeachRecord
+from servant_core.actions.records import SENSES, TeachRecord, label_scores
 from servant_core.errors import ServantError
 from servant_core.recognisers.base import UNKNOWN
 from servant_core.storage import atomic_save_npz, data_dir
@@ -205,6 +205,23 @@ class ActionLearner:
                 "so the arm stays put",
             )
         return ActionPrediction(scene, self.pose(scores))
+
+    def pose_for(
+        self,
+        scene: str,
+        scores: Mapping[str, Mapping[str, float]] | None = None,
+        confidence: float = 100.0,
+    ) -> dict[str, float]:
+        """`predict` for a caller that wants a pose or an error (the engine's action hook).
+
+        Without `scores`, the scene counts as certain (one-hot, as a typed label). A refusal is
+        raised as a ServantError carrying its reason.
+        """
+        self._check_fitted()
+        prediction = self.predict(scores or label_scores(scene, self.scenes_), scene, confidence)
+        if prediction.pose is None:
+            raise ServantError(f"arm: {prediction.reason}")
+        return prediction.pose
 
     # -- files ------------------------------------------------------------------------------
 

@@ -179,10 +179,9 @@ def run_move(args: argparse.Namespace) -> int:
             else {j.name: j.home_angle for j in settings.joints}
         )
         link.arm()
-        link.move_to(pose)
+        reached = link.move_to(pose)
         for note in link.notes:
             print(note, file=out)
-        reached = link.settle()
         emit(
             args,
             {
@@ -386,6 +385,5 @@ def _act(link: ServoLink, pose: dict[str, float], say: Callable[[str], None]) ->
         link.move_to(pose)
         for note in link.notes:
             say(note)
-        link.settle()
     except ServantError as error:
         say(str(error))

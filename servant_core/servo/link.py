@@ -251,17 +251,23 @@ class ServoLink:
             self.armed = False
             self.goal = {}
 
-    def move_to(self, pose: Mapping[str, float]) -> dict[str, float]:
-        """Aim at `pose` (clamped to the limits, see `notes`) and take the first rate-limited step.
+    def move_to(self, pose: Mapping[str, float], wait: bool = True) -> dict[str, float]:
+        """Aim at `pose` (clamped to the limits, see `notes`) and move there at the joints' speeds.
 
-        Returns the angles actually commanded now; call `step` (or `settle`) to go on.
+        With `wait` (the default) it blocks, stepping, until the arm is there or is disarmed (from
+        any thread); without, it takes the first step only and `step` (or `settle`) goes on.
+        Returns the angles commanded when it returns, for the joints of `pose`.
         """
         with self._lock:
             if not self.armed:
                 raise ServantError("the arm is not armed; arm it before moving it")
             clamped, self.notes = clamp_pose(self.joints, pose)
             self.goal.update(clamped)
-            return self.step()
+            commanded = self.step()
+        if not wait:
+            return commanded
+        self.settle()
+        return {n: self.commanded[n] for n in clamped}
 
     def step(self) -> dict[str, float]:
         """Move on towards the goal as far as the speed limits allow since the last step."""
@@ -282,9 +288,18 @@ class ServoLink:
     def at_goal(self) -> bool:
         return all(self.commanded.get(n) == a for n, a in self.goal.items())
 
-    def settle(self, timeout: float = 30.0, interval: float = 0.02) -> dict[str, float]:
-        """Step until the goal is reached (or `timeout` seconds by the link's clock pass)."""
-        end = self.clock() + timeout
+    def settle(self, interval: float = 0.02) -> dict[str, float]:
+        """Step until the goal is reached, the link is disarmed, or twice the time the move needs
+        at full speed has passed by the link's clock (a step can only be late, never too long)."""
+        with self._lock:
+            needed = max(
+                (
+                    abs(a - self.commanded[n]) / self.joints[n].max_speed_deg_s
+                    for n, a in self.goal.items()
+                ),
+                default=0.0,
+            )
+        end = self.clock() + 2 * needed + 1.0
         while self.armed and not self.at_goal and self.clock() < end:
             self.sleep(interval)
             self.step()
