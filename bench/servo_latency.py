@@ -1,8 +1,9 @@
 """Round-trip latency of a command to the servo emulator over a real pty, through pyserial.
 
-One round trip = the link encodes a move for one joint, writes it, then asks the controller for
-every joint's position and waits for the reply (`move_to` + `read_positions`). Median over 100,
-per protocol. Run: `python bench/servo_latency.py`.
+One round trip = the link encodes one rate-limited step for one joint, writes it, then asks
+the controller for every joint's position and waits for the reply
+(`move_to(pose, wait=False)` + `read_positions()`). Median over 100, per protocol.
+Run: `python bench/servo_latency.py`.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ def measure(protocol: str) -> tuple[float, float, float]:
             timings = []
             for i in range(ROUNDS + 5):
                 start = time.perf_counter()
-                link.move_to({"shoulder": 10 + i % 2})
+                link.move_to({"shoulder": 10 + i % 2}, wait=False)
                 link.read_positions()
                 timings.append(time.perf_counter() - start)
             timings = timings[5:]  # the first few warm up the pty and the parser
