@@ -50,7 +50,10 @@ class Joint:
         if not self.min_angle < self.max_angle:
             lines.append(f"joint {self.name!r}: min_angle must be below max_angle")
         if not 400 <= self.min_pulse_us < self.max_pulse_us <= 2600:
-            lines.append(f"joint {self.name!r}: pulses must satisfy 400 <= min_pulse_us < max_pulse_us <= 2600")
+            lines.append(
+                f"joint {self.name!r}: pulses must satisfy "
+                "400 <= min_pulse_us < max_pulse_us <= 2600"
+            )
         speed = self.max_speed_deg_s
         if not (isinstance(speed, int | float) and math.isfinite(speed) and speed > 0):
             lines.append(f"joint {self.name!r}: max_speed_deg_s must be a positive number")
@@ -97,7 +100,9 @@ class Settings:
     def problems(self) -> list[str]:
         lines = [line for joint in self.joints for line in joint.problems()]
         if self.protocol not in PROTOCOLS:
-            lines.append(f"protocol {self.protocol!r} is unknown; use one of {', '.join(PROTOCOLS)}")
+            lines.append(
+                f"protocol {self.protocol!r} is unknown; use one of {', '.join(PROTOCOLS)}"
+            )
         names = [j.name for j in self.joints]
         if len(set(names)) != len(names):
             lines.append("two joints share a name")
@@ -110,7 +115,10 @@ class Settings:
                 lines.append(f"{name} must be a positive number of seconds")
         if not (isinstance(self.pictures_needed, int) and self.pictures_needed >= 1):
             lines.append("pictures_needed must be a positive integer")
-        if not (isinstance(self.confidence_threshold, int | float) and 0 <= self.confidence_threshold <= 100):
+        if not (
+            isinstance(self.confidence_threshold, int | float)
+            and 0 <= self.confidence_threshold <= 100
+        ):
             lines.append("confidence_threshold must be a percentage, 0..100")
         return lines
 
@@ -123,7 +131,7 @@ def default_settings_path() -> Path:
 
 
 def load_settings(path: str | Path | None = None) -> Settings:
-    """The settings in `path` (default `config_dir()/settings.json`); the defaults if it is missing."""
+    """The settings in `path` (default `config_dir()/settings.json`); defaults if missing."""
     path = Path(path) if path is not None else default_settings_path()
     if not path.exists():
         return Settings()
@@ -137,7 +145,10 @@ def load_settings(path: str | Path | None = None) -> Settings:
     version = data.pop("version", VERSION)
     data.pop("format", None)
     if not isinstance(version, int) or version > VERSION:
-        raise ServantError(f"{path}: settings version {version!r} is newer than this Servant reads; upgrade Servant")
+        raise ServantError(
+            f"{path}: settings version {version!r} is newer than this Servant reads; "
+            "upgrade Servant"
+        )
     known = {f.name for f in fields(Settings)}
     unknown = sorted(set(data) - known)
     if unknown:

@@ -84,3 +84,13 @@ def test_a_tied_cluster_predicts_unknown():
 def test_unknown_method_is_a_clear_error():
     with pytest.raises(ServantError, match="no audio method named 'nope'"):
         make_recogniser("audio", "nope")
+
+
+def test_cluster_spreads_are_rms_distances_to_the_own_centre():
+    from servant_core.recognisers.base import cluster_spreads
+
+    X = np.array([[0, 0], [2, 0], [10, 0], [10, 4], [50, 50]], np.float32)
+    centres = np.array([[1, 0], [10, 2], [50, 50]], np.float32)
+    spreads = cluster_spreads(X, np.array([0, 0, 1, 1, 2]), centres)
+    # cluster 2 has one member: it takes the median of the others' spreads
+    assert spreads.tolist() == pytest.approx([1.0, 2.0, 1.5])

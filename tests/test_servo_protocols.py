@@ -49,7 +49,9 @@ def test_maestro_replies():
 def test_ssc32_moves_match_the_manual():
     # SSC-32 manual: "#5 P1600 S750 <cr>" and the group move "#5 P1600 #10 P750 T2500 <cr>".
     assert ssc32.move_command([Move(5, 1600, 750)]) == b"#5P1600S750\r"
-    assert ssc32.move_command([Move(5, 1600), Move(10, 750)], time_ms=2500) == b"#5P1600#10P750T2500\r"
+    assert (
+        ssc32.move_command([Move(5, 1600), Move(10, 750)], time_ms=2500) == b"#5P1600#10P750T2500\r"
+    )
     assert ssc32.move_command([Move(0, 1500.4, 166.9)]) == b"#0P1500S166\r"
     assert ssc32.query_pulse([5]) == b"QP5\r"
     assert ssc32.query_movement() == b"Q\r"
@@ -71,7 +73,9 @@ def test_ssc32_replies():
 def test_firmata_messages():
     assert firmata.set_pin_mode(9, firmata.PIN_MODE_SERVO) == bytes([0xF4, 0x09, 0x04])
     # Servo config: F0 70 pin minLSB minMSB maxLSB maxMSB F7; 544 = 0x220, 2400 = 0x960.
-    assert firmata.servo_config(9, 544, 2400) == bytes([0xF0, 0x70, 0x09, 0x20, 0x04, 0x60, 0x12, 0xF7])
+    assert firmata.servo_config(9, 544, 2400) == bytes(
+        [0xF0, 0x70, 0x09, 0x20, 0x04, 0x60, 0x12, 0xF7]
+    )
     assert firmata.analog_write(9, 1500) == bytes([0xE9, 0x5C, 0x0B])  # 1500 = 0x5DC
     assert firmata.analog_write(20, 1500) == bytes([0xF0, 0x6F, 0x14, 0x5C, 0x0B, 0xF7])
     assert firmata.report_version() == bytes([0xF9])
@@ -85,7 +89,10 @@ def test_firmata_replies_skip_unsolicited_reports():
     assert f.parse_positions(reply, [9]) == ([1500.0], len(reply))
     assert f.parse_positions(reply[:-1], [9]) is None
     firmware = bytes([0xF0, 0x79, 2, 5]) + b"S\x00F\x00" + bytes([0xF7])
-    assert f.parse_probe(firmware + bytes([0xF9, 2, 5])) == ("Firmata protocol 2.5", len(firmware) + 3)
+    assert f.parse_probe(firmware + bytes([0xF9, 2, 5])) == (
+        "Firmata protocol 2.5",
+        len(firmware) + 3,
+    )
     with pytest.raises(ProtocolError):
         f.parse_probe(bytes([0x13, 0x37]))
 

@@ -26,7 +26,7 @@ import numpy as np
 from sklearn.exceptions import ConvergenceWarning, NotFittedError
 from sklearn.neural_network import MLPRegressor
 
-from servant_core.actions.records import SENSES, TeachRecord
+from servant_core.actions.records import SENSES, TeachRecord, label_scores
 from servant_core.errors import ServantError
 from servant_core.recognisers.base import UNKNOWN
 from servant_core.storage import atomic_save_npz, data_dir
@@ -58,7 +58,9 @@ class ActionPrediction:
         return self.pose is not None
 
 
-def forward(x: np.ndarray, coefs: Sequence[np.ndarray], intercepts: Sequence[np.ndarray], activation: str) -> np.ndarray:
+def forward(
+    x: np.ndarray, coefs: Sequence[np.ndarray], intercepts: Sequence[np.ndarray], activation: str
+) -> np.ndarray:
     """The network's output for rows `x`: hidden layers through `activation`, a linear output."""
     a = x
     for i, (w, b) in enumerate(zip(coefs, intercepts, strict=True)):
@@ -93,7 +95,11 @@ class ActionLearner:
         """One input row: each sense's score for each known scene; a missing one counts as 0."""
         self._check_fitted()
         return np.array(
-            [float(scores.get(sense, {}).get(scene, 0.0)) for sense in SENSES for scene in self.scenes_]
+            [
+                float(scores.get(sense, {}).get(scene, 0.0))
+                for sense in SENSES
+                for scene in self.scenes_
+            ]
         )
 
     def fit(
@@ -106,8 +112,12 @@ class ActionLearner:
         if len(records) == 0:
             raise ServantError("nothing to learn from: teach at least one scene first")
         if self.activation not in ACTIVATIONS:
-            raise ServantError(f"activation {self.activation!r} is unknown; use one of {', '.join(ACTIVATIONS)}")
-        self.scenes_ = sorted({r.scene for r in records} | {s for r in records for d in r.scores.values() for s in d})
+            raise ServantError(
+                f"activation {self.activation!r} is unknown; use one of {', '.join(ACTIVATIONS)}"
+            )
+        self.scenes_ = sorted(
+            {r.scene for r in records} | {s for r in records for d in r.scores.values() for s in d}
+        )
         self.taught_scenes_ = sorted({r.scene for r in records})
         self.joints_ = list(dict.fromkeys(name for r in records for name in r.pose))
         home = self.home or {}
@@ -135,7 +145,8 @@ class ActionLearner:
             activation=self.activation,
             learning_rate_init=self.learning_rate_init,
             tol=0.0,
-            n_iter_no_change=self.max_iter + 1,  # train for exactly max_iter: the error is the report
+            n_iter_no_change=self.max_iter
+            + 1,  # train for exactly max_iter: the error is the report
             warm_start=True,
             random_state=self.random_state,
         )
@@ -164,7 +175,10 @@ class ActionLearner:
             raise NotFittedError("this ActionLearner has not been fitted; call fit(records) first")
 
     def _poses(self, x: np.ndarray) -> np.ndarray:
-        return forward(x, self.coefs_, self.intercepts_, self.activation) * self.y_scale_ + self.y_mean_
+        return (
+            forward(x, self.coefs_, self.intercepts_, self.activation) * self.y_scale_
+            + self.y_mean_
+        )
 
     def pose(self, scores: Mapping[str, Mapping[str, float]]) -> dict[str, float]:
         """The pose the network gives for `scores`, without the safety checks of `predict`."""
@@ -174,20 +188,40 @@ class ActionLearner:
     def predict(
         self, scores: Mapping[str, Mapping[str, float]], scene: str | None, confidence: float
     ) -> ActionPrediction:
-        """The pose for a decided `scene`; refused for no scene, an untaught one, or low confidence."""
+        """The pose for `scene`; refused for no scene, an untaught one or low confidence."""
         self._check_fitted()
         if scene is None or scene == UNKNOWN:
             return ActionPrediction(scene, None, "no scene was recognised, so the arm stays put")
         if scene not in self.taught_scenes_:
-            return ActionPrediction(scene, None, f"I was never taught what to do in {scene!r}; teach it first")
+            return ActionPrediction(
+                scene, None, f"I was never taught what to do in {scene!r}; teach it first"
+            )
         if not (math.isfinite(confidence) and confidence >= self.confidence_threshold):
             return ActionPrediction(
                 scene,
                 None,
-                f"confidence {confidence:.1f}% is under the threshold of {self.confidence_threshold:g}%, "
+                f"confidence {confidence:.1f}% is under the threshold of "
+                f"{self.confidence_threshold:g}%, "
                 "so the arm stays put",
             )
         return ActionPrediction(scene, self.pose(scores))
+
+    def pose_for(
+        self,
+        scene: str,
+        scores: Mapping[str, Mapping[str, float]] | None = None,
+        confidence: float = 100.0,
+    ) -> dict[str, float]:
+        """`predict` for a caller that wants a pose or an error (the engine's action hook).
+
+        Without `scores`, the scene counts as certain (one-hot, as a typed label). A refusal is
+        raised as a ServantError carrying its reason.
+        """
+        self._check_fitted()
+        prediction = self.predict(scores or label_scores(scene, self.scenes_), scene, confidence)
+        if prediction.pose is None:
+            raise ServantError(f"arm: {prediction.reason}")
+        return prediction.pose
 
     # -- files ------------------------------------------------------------------------------
 
@@ -215,26 +249,35 @@ class ActionLearner:
         }
         arrays = {f"coef_{i}": w for i, w in enumerate(self.coefs_)}
         arrays |= {f"intercept_{i}": b for i, b in enumerate(self.intercepts_)}
-        arrays |= {"y_mean": self.y_mean_, "y_scale": self.y_scale_, "header": np.array(json.dumps(header))}
+        arrays |= {
+            "y_mean": self.y_mean_,
+            "y_scale": self.y_scale_,
+            "header": np.array(json.dumps(header)),
+        }
         return atomic_save_npz(path, arrays)
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> ActionLearner:
         path = Path(path) if path is not None else default_learner_path()
         if not path.is_file():
-            raise ServantError(f"{path}: no trained action learner; teach the arm with `servant teach`")
+            raise ServantError(
+                f"{path}: no trained action learner; teach the arm with `servant teach`"
+            )
         try:
             with np.load(path, allow_pickle=False) as npz:
                 arrays = {name: npz[name] for name in npz.files}
             header = json.loads(str(arrays.pop("header")))
             fmt, version = header["format"], header["version"]
         except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile, EOFError) as exc:
-            raise ServantError(f"{path}: not a Servant action learner (corrupt or another format)") from exc
+            raise ServantError(
+                f"{path}: not a Servant action learner (corrupt or another format)"
+            ) from exc
         if fmt != FORMAT:
             raise ServantError(f"{path}: not a Servant action learner (format {fmt!r})")
         if version != VERSION:
             raise ServantError(
-                f"{path}: action learner version {version!r} is not {VERSION}; retrain with `servant teach`"
+                f"{path}: action learner version {version!r} is not {VERSION}; "
+                "retrain with `servant teach`"
             )
         try:
             params = header["params"]
@@ -253,5 +296,7 @@ class ActionLearner:
             if learner.coefs_[-1].shape[1] != len(learner.joints_):
                 raise ValueError("output size does not match the joints")
         except (KeyError, ValueError, TypeError) as exc:
-            raise ServantError(f"{path}: damaged action learner ({exc}); retrain with `servant teach`") from exc
+            raise ServantError(
+                f"{path}: damaged action learner ({exc}); retrain with `servant teach`"
+            ) from exc
         return learner

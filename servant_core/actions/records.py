@@ -41,7 +41,7 @@ def one_hot(scene: str, scenes: Iterable[str]) -> dict[str, float]:
 
 
 def label_scores(scene: str, scenes: Iterable[str]) -> dict[str, dict[str, float]]:
-    """Scores for a scene the user typed rather than the engine perceived: certain, for both senses."""
+    """Scores for a scene the user typed (not perceived): certain, for both senses."""
     scores = one_hot(scene, scenes)
     return {sense: dict(scores) for sense in SENSES}
 
@@ -55,7 +55,11 @@ def _finite_map(value: Any, what: str) -> dict[str, float]:
         raise ValueError(f"{what} must be a non-empty object of numbers")
     out = {}
     for key, number in value.items():
-        if isinstance(number, bool) or not isinstance(number, int | float) or not math.isfinite(number):
+        if (
+            isinstance(number, bool)
+            or not isinstance(number, int | float)
+            or not math.isfinite(number)
+        ):
             raise ValueError(f"{what}[{key!r}] is not a finite number")
         out[str(key)] = float(number)
     return out
@@ -88,7 +92,11 @@ def _record(raw: Any) -> TeachRecord:
 
 
 def _migrate_v1(raw_records: Sequence[Any], legacy_joint: str) -> list[dict[str, Any]]:
-    scenes = {r.get("scene") for r in raw_records if isinstance(r, Mapping) and isinstance(r.get("scene"), str)}
+    scenes: set[str] = {
+        r["scene"]
+        for r in raw_records
+        if isinstance(r, Mapping) and isinstance(r.get("scene"), str)
+    }
     return [
         {
             "scene": r.get("scene"),
@@ -113,7 +121,8 @@ def _read(path: Path, legacy_joint: str) -> tuple[int, list[TeachRecord]]:
     version = data.get("version")
     if not isinstance(version, int) or not 1 <= version <= VERSION:
         raise ServantError(
-            f"{path}: teach record version {version!r} is not one this Servant reads (1..{VERSION}); "
+            f"{path}: teach record version {version!r} is not one this Servant reads "
+            f"(1..{VERSION}); "
             "upgrade Servant"
         )
     raw_records = data.get("records")
@@ -130,8 +139,10 @@ def _read(path: Path, legacy_joint: str) -> tuple[int, list[TeachRecord]]:
     return version, records
 
 
-def load_records(path: str | Path | None = None, legacy_joint: str = "shoulder") -> list[TeachRecord]:
-    """Every record in `path` (default `default_records_path()`); none if the file does not exist."""
+def load_records(
+    path: str | Path | None = None, legacy_joint: str = "shoulder"
+) -> list[TeachRecord]:
+    """Every record in `path` (default `default_records_path()`); none if there is no file."""
     path = Path(path) if path is not None else default_records_path()
     if not path.exists():
         return []

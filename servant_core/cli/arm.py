@@ -43,12 +43,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "counts as certain: one-hot scores over the known scenes, for both senses.",
     )
     _link_options(teach)
-    teach.add_argument("--records", help="teach record file (default: the data dir's teach/records.json)")
+    teach.add_argument(
+        "--records", help="teach record file (default: the data dir's teach/records.json)"
+    )
     teach.add_argument("--learner", help="learner file (default: the data dir's teach/learner.npz)")
     teach.add_argument("--joint", help="the joint a bare number moves (default: the first joint)")
-    teach.add_argument("--iterations", type=int, default=3000, help="training iterations (default 3000)")
     teach.add_argument(
-        "--predict-only", action="store_true", help="skip training: load the saved learner and ask it"
+        "--iterations", type=int, default=3000, help="training iterations (default 3000)"
+    )
+    teach.add_argument(
+        "--predict-only",
+        action="store_true",
+        help="skip training: load the saved learner and ask it",
     )
     teach.set_defaults(handler=run_teach)
 
@@ -74,15 +80,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     emulate.add_argument("--protocol", choices=sorted(PROTOCOLS), default="maestro")
     emulate.add_argument("--link", help="also make this path a symlink to the port (a stable name)")
-    emulate.add_argument("--seconds", type=float, help="stop after this many seconds (default: Ctrl-C)")
+    emulate.add_argument(
+        "--seconds", type=float, help="stop after this many seconds (default: Ctrl-C)"
+    )
     emulate.set_defaults(handler=run_emulate)
 
 
 def _link_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--settings", help="settings file (default: the config dir's settings.json)")
-    parser.add_argument("--port", help="serial port of the servo controller (default: from settings)")
-    parser.add_argument("--protocol", help=f"one of {', '.join(PROTOCOLS)} (default: from settings)")
-    parser.add_argument("--dry-run", action="store_true", help="send nothing: print the bytes instead")
+    parser.add_argument(
+        "--settings", help="settings file (default: the config dir's settings.json)"
+    )
+    parser.add_argument(
+        "--port", help="serial port of the servo controller (default: from settings)"
+    )
+    parser.add_argument(
+        "--protocol", help=f"one of {', '.join(PROTOCOLS)} (default: from settings)"
+    )
+    parser.add_argument(
+        "--dry-run", action="store_true", help="send nothing: print the bytes instead"
+    )
     parser.add_argument("--timeout", type=float, default=0.5, help="seconds to wait for an answer")
     parser.add_argument("--json", action="store_true", help="print JSON")
 
@@ -99,7 +115,10 @@ def _open_link(args: argparse.Namespace, settings: Settings, out: TextIO) -> Ser
             "on_bytes": lambda data: print(f"  bytes: {_show_bytes(protocol, data)}", file=out),
         }
     return ServoLink.open(
-        args.port or settings.serial_port, args.protocol or settings.protocol, settings.joints, **options
+        args.port or settings.serial_port,
+        args.protocol or settings.protocol,
+        settings.joints,
+        **options,
     )
 
 
@@ -119,11 +138,12 @@ def _angles(pose: dict[str, float]) -> str:
 def parse_pose(text: str, default_joint: str) -> dict[str, float]:
     """`42` (the default joint) or `shoulder=40 elbow=30` (commas also separate)."""
     words = [w for w in re.split(r"[\s,]+", text.strip()) if w]
-    if len(words) == 1 and "=" not in words[0]:
-        words = [f"{default_joint}={words[0]}"]
+    if not words:
+        raise ServantError("no action given; type an angle, or joint=angle pairs")
+    bare = len(words) == 1 and "=" not in words[0]
     pose: dict[str, float] = {}
     for word in words:
-        name, sep, value = word.partition("=")
+        name, sep, value = (default_joint, "=", word) if bare else word.partition("=")
         try:
             angle = float(value)
         except ValueError:
@@ -142,7 +162,8 @@ def run_list_ports(args: argparse.Namespace) -> int:
 
     ports = [{"port": p.device, "description": p.description} for p in list_ports.comports()]
     text = "\n".join(f"{p['port']}\t{p['description']}" for p in ports) or (
-        "No serial ports found. Without hardware, `servant emulate-servo` starts an emulated controller."
+        "No serial ports found. Without hardware, `servant emulate-servo` "
+        "starts an emulated controller."
     )
     emit(args, ports, text)
     return 0
@@ -158,13 +179,17 @@ def run_move(args: argparse.Namespace) -> int:
             else {j.name: j.home_angle for j in settings.joints}
         )
         link.arm()
-        link.move_to(pose)
+        reached = link.move_to(pose)
         for note in link.notes:
             print(note, file=out)
-        reached = link.settle()
         emit(
             args,
-            {"pose": reached, "clamped": link.notes, "controller": link.controller, "port": link.port},
+            {
+                "pose": reached,
+                "clamped": link.notes,
+                "controller": link.controller,
+                "port": link.port,
+            },
             f"moved to {_angles(reached)}",
         )
     return 0
@@ -174,7 +199,10 @@ def run_query(args: argparse.Namespace) -> int:
     settings = load_settings(args.settings)
     with _open_link(args, settings, sys.stderr if args.json else sys.stdout) as link:
         angles = link.read_positions()
-    text = "\n".join(f"{name}\t{angle:.1f}" for name, angle in angles.items()) or "no joint sends a pulse yet"
+    text = (
+        "\n".join(f"{name}\t{angle:.1f}" for name, angle in angles.items())
+        or "no joint sends a pulse yet"
+    )
     emit(args, {"angles": angles, "port": link.port, "controller": link.controller}, text)
     return 0
 
@@ -224,7 +252,9 @@ class Session:
         return line.strip()
 
 
-def run_teach(args: argparse.Namespace, inp: TextIO | None = None, out: TextIO | None = None) -> int:
+def run_teach(
+    args: argparse.Namespace, inp: TextIO | None = None, out: TextIO | None = None
+) -> int:
     session = Session(inp or sys.stdin, out or sys.stdout)
     settings = load_settings(args.settings)
     joint = settings.joint(args.joint).name if args.joint else settings.joints[0].name
@@ -234,13 +264,16 @@ def run_teach(args: argparse.Namespace, inp: TextIO | None = None, out: TextIO |
     try:
         if link is not None:
             link.arm()
-            session.say(f"The arm is armed on {link.port} ({link.protocol.title}); it moves as you teach.")
+            session.say(
+                f"The arm is armed on {link.port} ({link.protocol.title}); it moves as you teach."
+            )
         if args.predict_only:
             learner = ActionLearner.load(learner_path)
         else:
-            learner = _train(args, settings, session, joint, records_path, link)
-            if learner is None:
+            trained = _train(args, settings, session, joint, records_path, link)
+            if trained is None:
                 return 1
+            learner = trained
             learner.save(learner_path)
         _predict(learner, session, link)
     finally:
@@ -263,15 +296,16 @@ def _train(
         session.say(f"Loaded {len(records)} earlier teach records from {records_path}.")
     session.say(
         f"Training phase. Type a scene label, then the action: an angle for {joint}, "
-        "joint=angle pairs" + (", or `record [seconds]` to read the pose you guide the arm into" if link else "")
+        "joint=angle pairs"
+        + (", or `record [seconds]` to read the pose you guide the arm into" if link else "")
         + ". An empty label ends training."
     )
-    while (label := session.ask("Scene label: ")) :
-        pose = _ask_pose(session, joint, joints, link)
-        if pose is None:
+    while label := session.ask("Scene label: "):
+        answer = _ask_pose(session, joint, joints, link)
+        if answer is None:
             session.say(f"No action for {label}; nothing recorded.")
             continue
-        pose, source, notes = pose
+        pose, source, notes = answer
         scenes = {r.scene for r in records}
         record = TeachRecord(label, label_scores(label, scenes), pose, time.time(), source, notes)
         records = append_record(record, records_path, legacy_joint=joint)
@@ -297,7 +331,7 @@ def _train(
 def _ask_pose(
     session: Session, joint: str, joints: dict[str, Joint], link: ServoLink | None
 ) -> tuple[dict[str, float], str, list[str]] | None:
-    """Ask until the action is a pose the arm can take (clamped, and said so); None at end of input."""
+    """Ask until the action is a pose the arm can take (clamped, said so); None at end of input."""
     while (answer := session.ask("What action should I take? ")) is not None:
         try:
             if answer.split()[:1] == ["record"]:
@@ -312,7 +346,9 @@ def _ask_pose(
     return None
 
 
-def _record_pose(session: Session, answer: str, link: ServoLink | None) -> tuple[dict[str, float], str, list[str]]:
+def _record_pose(
+    session: Session, answer: str, link: ServoLink | None
+) -> tuple[dict[str, float], str, list[str]]:
     if link is None:
         raise ServantError("recording reads the arm's positions: start `servant teach` with --port")
     words = answer.split()
@@ -349,6 +385,5 @@ def _act(link: ServoLink, pose: dict[str, float], say: Callable[[str], None]) ->
         link.move_to(pose)
         for note in link.notes:
             say(note)
-        link.settle()
     except ServantError as error:
         say(str(error))

@@ -44,7 +44,7 @@ class KMeansSceneRecogniser:
     random_state: int | None
     n_init: int
 
-    def fit(self, X: np.ndarray, scenes: Sequence[str]) -> Self:
+    def fit(self, X: np.ndarray, scenes: Sequence[str] | np.ndarray) -> Self:
         self.scenes_ = check_training_scenes(scenes, len(X))
         kmeans = KMeans(
             n_clusters=len(self.scenes_),

@@ -1,4 +1,4 @@
-"""Angles to pulse widths and back, per joint, and the clamping and rate limiting every command obeys.
+"""Angles to pulse widths and back, per joint; the clamping and rate limiting every command obeys.
 
 All pure functions: the link applies them to every pose before any byte is encoded.
 """
@@ -37,7 +37,9 @@ def clamp_pose(
     notes: list[str] = []
     for name, angle in pose.items():
         if name not in joints:
-            raise ServantError(f"no joint named {name!r}; the arm's joints are: {', '.join(joints)}")
+            raise ServantError(
+                f"no joint named {name!r}; the arm's joints are: {', '.join(joints)}"
+            )
         try:
             value = float(angle)
         except (TypeError, ValueError):

@@ -22,7 +22,7 @@ from servant_core.errors import ServantError
 from servant_core.servo import PROTOCOLS, firmata, maestro, ssc32
 
 FAULTS = (None, "silent", "garbage")
-GARBAGE = b"\xff\x00\xfe\x13\x37"
+GARBAGE = b"\xff" * 8  # line noise, as a wrong baud rate gives; no protocol accepts it
 SSC32_VERSION = b"SSC32-V2.50USB"
 FIRMATA_VERSION = (2, 5)
 FIRMATA_DEFAULT_PULSES = (544, 2400)  # the Arduino Servo library's defaults
@@ -67,7 +67,9 @@ class ServoEmulator:
         self, protocol: str, clock: Callable[[], float] = time.monotonic, fault: str | None = None
     ) -> None:
         if protocol not in PROTOCOLS:
-            raise ServantError(f"servo protocol {protocol!r} is unknown; use one of {', '.join(PROTOCOLS)}")
+            raise ServantError(
+                f"servo protocol {protocol!r} is unknown; use one of {', '.join(PROTOCOLS)}"
+            )
         if fault not in FAULTS:
             raise ValueError(f"fault must be one of {FAULTS}")
         self.protocol = protocol
@@ -255,13 +257,18 @@ class ServoEmulator:
         kind, data = body[0], body[1:]
         if kind == firmata.SERVO_CONFIG and len(data) >= 5:
             pin = data[0]
-            self.servo_ranges[pin] = (firmata.from_seven_bit(data[1:3]), firmata.from_seven_bit(data[3:5]))
+            self.servo_ranges[pin] = (
+                firmata.from_seven_bit(data[1:3]),
+                firmata.from_seven_bit(data[3:5]),
+            )
             self.pin_modes[pin] = firmata.PIN_MODE_SERVO
         elif kind == firmata.EXTENDED_ANALOG and len(data) >= 2:
             self._firmata_write(data[0], firmata.from_seven_bit(data[1:]))
         elif kind == firmata.PIN_STATE_QUERY and data:
             pin = data[0]
-            return firmata.pin_state_response(pin, self.pin_modes.get(pin, 0), self.pin_states.get(pin, 0))
+            return firmata.pin_state_response(
+                pin, self.pin_modes.get(pin, 0), self.pin_states.get(pin, 0)
+            )
         return b""
 
     def _firmata_write(self, pin: int, value: int) -> None:
@@ -288,7 +295,9 @@ class ServoEmulator:
             tmp.symlink_to(self.port)
             os.replace(tmp, self._link)
         self._stop.clear()
-        self._thread = threading.Thread(target=self._serve, name=f"servo-emulator-{self.protocol}", daemon=True)
+        self._thread = threading.Thread(
+            target=self._serve, name=f"servo-emulator-{self.protocol}", daemon=True
+        )
         self._thread.start()
         return str(self._link) if self._link else self.port
 
@@ -320,7 +329,11 @@ class ServoEmulator:
             for fd in self._fds:
                 os.close(fd)
             self._fds = None
-        if self._link is not None and self._link.is_symlink() and os.readlink(self._link) == self.port:
+        if (
+            self._link is not None
+            and self._link.is_symlink()
+            and os.readlink(self._link) == self.port
+        ):
             self._link.unlink()
         self._link = None
 

@@ -67,7 +67,11 @@ def analog_write(pin: int, value: int) -> bytes:
 
 def extended_analog(pin: int, value: int) -> bytes:
     count = max(2, (value.bit_length() + 6) // 7)
-    return bytes((START_SYSEX, EXTENDED_ANALOG, _pin(pin))) + seven_bit(value, count) + bytes((END_SYSEX,))
+    return (
+        bytes((START_SYSEX, EXTENDED_ANALOG, _pin(pin)))
+        + seven_bit(value, count)
+        + bytes((END_SYSEX,))
+    )
 
 
 def report_version() -> bytes:
@@ -80,7 +84,11 @@ def pin_state_query(pin: int) -> bytes:
 
 def pin_state_response(pin: int, mode: int, state: int) -> bytes:
     count = max(1, (state.bit_length() + 6) // 7)
-    return bytes((START_SYSEX, PIN_STATE_RESPONSE, pin, mode)) + seven_bit(state, count) + bytes((END_SYSEX,))
+    return (
+        bytes((START_SYSEX, PIN_STATE_RESPONSE, pin, mode))
+        + seven_bit(state, count)
+        + bytes((END_SYSEX,))
+    )
 
 
 def from_seven_bit(data: bytes) -> int:
@@ -102,7 +110,7 @@ def next_message(buffer: bytes) -> tuple[bytes, int] | None:
         if any(b >= 0x80 for b in body):
             raise ProtocolError("command byte inside a Firmata sysex message")
         return buffer[: end + 1], end + 1
-    # Analog and digital messages carry a pin or port in their low nibble; all three have 2 data bytes.
+    # Analog and digital messages carry a pin or port in their low nibble; all have 2 data bytes.
     if (command & 0xF0) in (ANALOG_MESSAGE, DIGITAL_MESSAGE) or command == REPORT_VERSION:
         if len(buffer) < 3:
             return None
@@ -126,7 +134,7 @@ class Firmata:
         ]
 
     def _find(self, buffer: bytes, wanted) -> tuple[bytes, int] | None:
-        """The first message `wanted` accepts, skipping the others (StandardFirmata reports freely)."""
+        """The first message `wanted` accepts, skipping others (StandardFirmata reports freely)."""
         offset = 0
         while (found := next_message(buffer[offset:])) is not None:
             message, size = found

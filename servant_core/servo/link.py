@@ -44,7 +44,9 @@ def open_serial(port: str, baudrate: int) -> serial.Serial:
         text = str(exc)
         if code == errno.ENOENT or "No such file" in text:
             reason = "no such serial port; `servant servo list-ports` lists the ports there are"
-        elif code in (errno.EBUSY, errno.EAGAIN) or "lock" in text.lower() or "busy" in text.lower():
+        elif (
+            code in (errno.EBUSY, errno.EAGAIN) or "lock" in text.lower() or "busy" in text.lower()
+        ):
             reason = "the port is busy: another program has it open; close it and try again"
         elif code == errno.EACCES or "Permission denied" in text:
             reason = "permission denied; add yourself to the `dialout` group or fix the port's mode"
@@ -114,7 +116,7 @@ class ServoLink:
         joints: Sequence[Joint],
         **options,
     ) -> ServoLink:
-        """Connect to the controller on `port` and check it answers; `dry_run=True` needs no port."""
+        """Connect to the controller on `port`, check it answers; `dry_run=True` needs no port."""
         proto = protocol_for(protocol)
         problems = [line for j in joints for line in j.problems()] + proto.check_joints(joints)
         if not joints:
@@ -122,7 +124,9 @@ class ServoLink:
         if problems:
             raise ServantError(f"settings: {problems[0]}; fix the joints in the settings file")
         if not options.get("dry_run") and not port:
-            raise ServantError("no serial port given; pass --port (see `servant servo list-ports`) or --dry-run")
+            raise ServantError(
+                "no serial port given; pass --port (see `servant servo list-ports`) or --dry-run"
+            )
         link = cls(proto, joints, port, **options)
         if not link.dry_run:
             link._connect()
@@ -148,7 +152,7 @@ class ServoLink:
             raise
 
     def reconnect(self) -> bool:
-        """Reopen a lost port if it is back (tried at most once a second); the link stays disarmed."""
+        """Reopen a lost port if it is back (tried at most once a second), still disarmed."""
         with self._lock:
             if self.connected:
                 return True
@@ -194,7 +198,8 @@ class ServoLink:
     def _require_serial(self) -> serial.Serial:
         if self._serial is None and not self.reconnect():
             raise ServantError(
-                f"{self.port}: the {self.protocol.title} is not connected; plug it in (Servant reconnects by itself)"
+                f"{self.port}: the {self.protocol.title} is not connected; "
+                "plug it in (Servant reconnects by itself)"
             )
         assert self._serial is not None
         return self._serial
@@ -212,14 +217,16 @@ class ServoLink:
             except ProtocolError as exc:
                 self._io(handle.reset_input_buffer)
                 raise ServantError(
-                    f"{self.port}: the controller sent bytes that are not a {self.protocol.title} reply "
+                    f"{self.port}: the controller sent bytes that are not a "
+                    f"{self.protocol.title} reply "
                     f"({exc}); check the protocol and the baud rate ({self.baudrate})"
                 ) from exc
             if parsed is not None:
                 return parsed[0]
             if time.monotonic() > deadline:
                 raise ServantError(
-                    f"{self.port}: no answer from a {self.protocol.title} within {self.timeout:g} s; "
+                    f"{self.port}: no answer from a {self.protocol.title} "
+                    f"within {self.timeout:g} s; "
                     "check it is powered and that the protocol and baud rate are right"
                 )
             buffer += self._io(lambda: handle.read(max(1, handle.in_waiting)))
@@ -244,17 +251,23 @@ class ServoLink:
             self.armed = False
             self.goal = {}
 
-    def move_to(self, pose: Mapping[str, float]) -> dict[str, float]:
-        """Aim at `pose` (clamped to the limits, see `notes`) and take the first rate-limited step.
+    def move_to(self, pose: Mapping[str, float], wait: bool = True) -> dict[str, float]:
+        """Aim at `pose` (clamped to the limits, see `notes`) and move there at the joints' speeds.
 
-        Returns the angles actually commanded now; call `step` (or `settle`) to go on.
+        With `wait` (the default) it blocks, stepping, until the arm is there or is disarmed (from
+        any thread); without, it takes the first step only and `step` (or `settle`) goes on.
+        Returns the angles commanded when it returns, for the joints of `pose`.
         """
         with self._lock:
             if not self.armed:
                 raise ServantError("the arm is not armed; arm it before moving it")
             clamped, self.notes = clamp_pose(self.joints, pose)
             self.goal.update(clamped)
-            return self.step()
+            commanded = self.step()
+        if not wait:
+            return commanded
+        self.settle()
+        return {n: self.commanded[n] for n in clamped}
 
     def step(self) -> dict[str, float]:
         """Move on towards the goal as far as the speed limits allow since the last step."""
@@ -275,9 +288,18 @@ class ServoLink:
     def at_goal(self) -> bool:
         return all(self.commanded.get(n) == a for n, a in self.goal.items())
 
-    def settle(self, timeout: float = 30.0, interval: float = 0.02) -> dict[str, float]:
-        """Step until the goal is reached (or `timeout` seconds by the link's clock pass)."""
-        end = self.clock() + timeout
+    def settle(self, interval: float = 0.02) -> dict[str, float]:
+        """Step until the goal is reached, the link is disarmed, or twice the time the move needs
+        at full speed has passed by the link's clock (a step can only be late, never too long)."""
+        with self._lock:
+            needed = max(
+                (
+                    abs(a - self.commanded[n]) / self.joints[n].max_speed_deg_s
+                    for n, a in self.goal.items()
+                ),
+                default=0.0,
+            )
+        end = self.clock() + 2 * needed + 1.0
         while self.armed and not self.at_goal and self.clock() < end:
             self.sleep(interval)
             self.step()
@@ -312,7 +334,9 @@ class ServoLink:
                 lambda buffer: self.protocol.parse_positions(buffer, channels),
             )
             return {
-                n: pulse_to_angle(self.joints[n], p) for n, p in zip(names, pulses, strict=True) if p is not None
+                n: pulse_to_angle(self.joints[n], p)
+                for n, p in zip(names, pulses, strict=True)
+                if p is not None
             }
 
     def record(self, duration: float, interval: float = 0.1) -> list[dict[str, float]]:

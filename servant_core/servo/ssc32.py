@@ -25,7 +25,9 @@ def move_command(moves: Sequence[Move], time_ms: int | None = None) -> bytes:
     for m in moves:
         pulse = round(m.pulse_us)
         if not MIN_PULSE_US <= pulse <= MAX_PULSE_US:
-            raise ValueError(f"pulse {pulse} us is outside the SSC-32's {MIN_PULSE_US}..{MAX_PULSE_US}")
+            raise ValueError(
+                f"pulse {pulse} us is outside the SSC-32's {MIN_PULSE_US}..{MAX_PULSE_US}"
+            )
         part = f"#{m.channel}P{pulse}"
         if m.speed_us_s is not None:
             part += f"S{max(1, math.floor(m.speed_us_s))}"  # rounded down: never faster
@@ -75,7 +77,11 @@ class SSC32:
                 raise ProtocolError("no end of line in the version reply")
             return None
         line = buffer[:end]
-        if not line.startswith(VERSION_PREFIX) or not line.isascii() or not line.decode().isprintable():
+        if (
+            not line.startswith(VERSION_PREFIX)
+            or not line.isascii()
+            or not line.decode().isprintable()
+        ):
             raise ProtocolError(f"{line[:20]!r} is not an SSC-32 version")
         return line.decode(), end + 1
 
