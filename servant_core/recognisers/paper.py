@@ -50,6 +50,8 @@ class KMeansSceneRecogniser:
             n_clusters=len(self.scenes_),
             n_init=self.n_init,
             random_state=self.random_state,
+            # centre X in place and put it back (float rounding aside) instead of copying it
+            copy_x=False,
         )
         clusters = kmeans.fit_predict(X)
         self.centres_ = kmeans.cluster_centers_.astype(np.float32)
