@@ -541,11 +541,11 @@ class Engine:
         Returns mono float32 at `audio_rate`. Raises ServantError without a working audio source
         or if the audio does not arrive within `timeout` (default: twice `seconds` plus 2 s).
         """
+        if not self.running:
+            raise ServantError("engine: not running; start it before recording")
         ring = self._ring
         if ring is None or not self._audio_ok or self.audio is None:
             raise ServantError("microphone: no sound to record; check the microphone (see status)")
-        if not self.running:
-            raise ServantError("engine: not running; start it before recording")
         count = int(round(seconds * self.audio.rate))
         if count > ring.capacity:
             raise ServantError(f"engine: cannot record more than {RING_SECONDS:g} s at once")
