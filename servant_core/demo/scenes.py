@@ -70,10 +70,13 @@ def segment_at(t: float, walk: tuple[Segment, ...] = WALK) -> Segment:
 
 
 def synth_window(
-    scene: str, rng: np.random.Generator, seconds: float = DEFAULT_WINDOW_SECONDS
+    scene: str,
+    rng: np.random.Generator,
+    seconds: float = DEFAULT_WINDOW_SECONDS,
+    rate: int = DEMO_RATE,
 ) -> np.ndarray:
     """A window of the scene's sound at its typical loudness (within ±1.5 dB)."""
-    x = SCENE_SOUNDS[scene](rng, seconds, DEMO_RATE)
+    x = SCENE_SOUNDS[scene](rng, seconds, rate)
     level_db = SCENE_LEVEL_DB[scene] + rng.uniform(-1.5, 1.5)
     rms = float(np.sqrt(np.mean(x.astype(np.float64) ** 2))) or 1.0
     return (x * (10 ** (level_db / 20) / rms)).astype(np.float32)
