@@ -3,6 +3,9 @@ windows and pictures, and a walk in which detections, mismatches and "No scene d
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -18,6 +21,7 @@ from servant_core.demo.scenes import (
 )
 from servant_core.engine import build_demo_engine
 from servant_core.events import AcousticPrediction, Decision, VisualPrediction
+from tests.conftest import REPO
 
 
 @pytest.fixture(scope="module")
@@ -106,3 +110,49 @@ def test_walk_is_deterministic_and_shows_detections_mismatch_and_no_scene():
     end = start + WALK[2].seconds - 5.0
     assert all(scene is None for t, scene in decisions if start + 5 < t < end)
     assert segment_at(start).sound == "street" and segment_at(start).sight == "coffee"
+
+
+def test_servant_demo_headless_prints_the_papers_lines():
+    result = subprocess.run(
+        [sys.executable, "-m", "servant_tui", "demo", "--headless", "--fast", "--duration", "30"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=120,
+    )
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert any(line.endswith("microphone ok: demo sound: listening at 16000 Hz") for line in lines)
+    detected = [line for line in lines if "CoffeeScene detected  confidence" in line]
+    assert detected and detected[0].startswith("[   9.")  # 5 s window + 3 pictures 2 s apart
+    assert any("heard gym" in line for line in lines)
+
+
+def test_servant_run_headless_on_a_video_camera_without_microphone(tmp_path):
+    import cv2
+
+    path = tmp_path / "camera.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (32, 24))
+    for _ in range(5):
+        writer.write(np.zeros((24, 32, 3), np.uint8))
+    writer.release()
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "servant_tui",
+            "run",
+            "--headless",
+            "--no-mic",
+            "--camera",
+            str(path),
+            "--duration",
+            "0.3",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=60,
+    )
+    assert result.returncode == 0, result.stderr
+    assert f"camera ok: video {path}: ready" in result.stdout
