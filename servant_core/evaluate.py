@@ -26,7 +26,13 @@ from servant_core.library import (
     iter_recording_windows,
     read_pictures,
 )
-from servant_core.recognisers import UNKNOWN, Recogniser, make_recogniser
+from servant_core.recognisers import (
+    UNKNOWN,
+    AcousticRecogniser,
+    Recogniser,
+    make_audio_recogniser,
+    make_recogniser,
+)
 
 PROTOCOLS = ("temporal", "recording")
 TRAIN_FRACTION = 0.6
@@ -108,14 +114,16 @@ def scores(preds: Predictions, scenes: Sequence[str]) -> dict[str, Any]:
 
 
 def featurize_library_audio(
-    library: SceneLibrary, model: Recogniser, on_error: Callable[[ServantError], None] | None = None
+    library: SceneLibrary,
+    model: AcousticRecogniser,
+    on_error: Callable[[ServantError], None] | None = None,
 ) -> WindowFeatures:
     return featurize_recordings(
         library.recordings,
         model.featurize,
         model.rate,
         model.window_seconds,
-        on_error,  # type: ignore[attr-defined]
+        on_error,
     )
 
 
@@ -129,13 +137,13 @@ def evaluate_audio(
     if protocol not in PROTOCOLS:
         raise ServantError(f"unknown protocol {protocol!r}; choose temporal or recording")
     params = params or {}
-    probe = make_recogniser("audio", method, **params)
+    probe = make_audio_recogniser(method, **params)
     wf = featurize_library_audio(library, probe, on_error)
     preds = Predictions([], [], [])
     skipped: list[str] = []
     if protocol == "temporal":
         train = temporal_split(wf.recording, wf.position)
-        model = make_recogniser("audio", method, **params).fit(wf.features[train], wf.scenes[train])
+        model = make_audio_recogniser(method, **params).fit(wf.features[train], wf.scenes[train])
         preds.extend(model, wf.features[~train], wf.scenes[~train])
         n_train = int(train.sum())
     else:
@@ -143,7 +151,7 @@ def evaluate_audio(
         for r in np.unique(wf.recording):
             test = wf.recording == r
             try:
-                model = make_recogniser("audio", method, **params).fit(
+                model = make_audio_recogniser(method, **params).fit(
                     wf.features[~test], wf.scenes[~test]
                 )
             except ServantError as error:
@@ -253,7 +261,7 @@ def evaluate_fusion(
             f"{library.root}: fusion needs at least two scenes with both recordings and pictures"
         )
     library = library.restricted(paired)
-    audio = make_recogniser("audio", acoustic_method)
+    audio = make_audio_recogniser(acoustic_method)
     wf = featurize_library_audio(library, audio, on_error)
     train = temporal_split(wf.recording, wf.position)
     audio.fit(wf.features[train], wf.scenes[train])
@@ -353,7 +361,7 @@ def paper_tables(
             f"{library.root}: the tables need at least two scenes with both recordings and pictures"
         )
     library = library.restricted(paired)
-    audio = make_recogniser("audio", acoustic_method)
+    audio = make_audio_recogniser(acoustic_method)
     wf = featurize_library_audio(library, audio, on_error)
     train = (
         temporal_split(wf.recording, wf.position)
@@ -375,7 +383,7 @@ def paper_tables(
         test_library,
         paired,
         audio.rate,
-        audio.window_seconds,  # type: ignore[attr-defined]
+        audio.window_seconds,
     )
     cells: dict[str, dict[str, dict[str, Any]]] = {}
     for picture_scene in paired:

@@ -138,12 +138,24 @@ def featurize_recordings(
     if not parts:
         raise ServantError("no usable recording: every audio file was unreadable or too short")
     return WindowFeatures(
-        np.concatenate(parts),
+        _concatenate_releasing(parts),
         np.array(scenes),
         np.array(rec_ids),
         np.array(positions),
         list(recordings),
     )
+
+
+def _concatenate_releasing(parts: list[np.ndarray]) -> np.ndarray:
+    """np.concatenate that frees each part once copied, so memory never holds both in full
+    (the paper's FFT vectors of a whole library are hundreds of megabytes)."""
+    out = np.empty((sum(len(p) for p in parts), *parts[0].shape[1:]), dtype=parts[0].dtype)
+    start = 0
+    while parts:
+        part = parts.pop(0)
+        out[start : start + len(part)] = part
+        start += len(part)
+    return out
 
 
 def read_picture(path: str | Path) -> np.ndarray:

@@ -1,19 +1,67 @@
-"""The `servant` console script: the TUI, or a headless subcommand of servant_core.cli."""
+"""The `servant` console script: the TUI, or a headless subcommand of servant_core.cli.
+
+`servant` alone (or `servant run`) opens the TUI on the live devices; `servant demo` opens it on
+the demo scenes. With `--headless` (or `demo --fast`) they print lines instead, as servant_core's
+other subcommands do.
+"""
 
 from __future__ import annotations
 
+import argparse
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
-from servant_core.cli import build_parser, run_handler
+from servant_core.cli import build_parser as build_core_parser
+from servant_core.cli import run_handler
+from servant_core.engine import LiveSettings, build_demo_engine, build_live_engine
+from servant_core.errors import ServantError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """servant_core's parser: its `demo` and `run` open the TUI here unless `--headless`."""
+    return build_core_parser()
+
+
+def run_tui(engine_factory: Callable[[], Any], mode: str) -> int:
+    from servant_tui.app import ServantApp
+
+    try:
+        engine = engine_factory()
+    except ServantError as error:
+        print(f"servant: error: {error}", file=sys.stderr)
+        return 2
+    app = ServantApp(engine, mode=mode)
+    app.run()
+    return app.return_code or 0
+
+
+def live_settings(args: argparse.Namespace | None) -> LiveSettings:
+    """`servant run`'s options; `servant` alone takes the devices chosen in Settings."""
+    if args is None:
+        from servant_core.settings import load_settings
+
+        chosen = load_settings()
+        camera = chosen.camera if chosen.camera is not None else 0
+        return LiveSettings(microphone=chosen.audio_device, camera=camera)
+    return LiveSettings(
+        model=args.model,
+        microphone=args.mic,
+        rate=args.rate,
+        use_microphone=not args.no_mic,
+        camera=None if args.no_camera else args.camera,
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if getattr(args, "handler", None) is None:
-        parser.print_help()
-        return 0
+    args = build_parser().parse_args(argv)
+    headless = getattr(args, "headless", False)
+    if args.command is None or (args.command == "run" and not headless and not args.list_devices):
+        return run_tui(
+            lambda: build_live_engine(live_settings(args if args.command else None)), "live"
+        )
+    if args.command == "demo" and not headless and not args.fast:
+        return run_tui(lambda: build_demo_engine(args.seed), "demo")
     return run_handler(args)
 
 

@@ -29,16 +29,16 @@ def shared_data() -> Path:
 
 
 @pytest.fixture(autouse=True)
-def _private_dirs(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> None:
+def _private_dirs(
+    tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """Keep every test away from the user's real data and config directories."""
     base = tmp_path_factory.mktemp("servant-home")
     monkeypatch.setenv("SERVANT_DATA_DIR", str(base / "data"))
     monkeypatch.setenv("SERVANT_CONFIG_DIR", str(base / "config"))
 
 
-def link_library(
-    root: Path, shared: Path, scenes: dict[str, tuple[list[str], int]]
-) -> Path:
+def link_library(root: Path, shared: Path, scenes: dict[str, tuple[list[str], int]]) -> Path:
     """A scene library of symbolic links into the real data (nothing is copied):
     scenes maps scene -> (recording file names, number of pictures taken by file order)."""
     for scene, (recordings, n_pictures) in scenes.items():

@@ -40,7 +40,10 @@ def test_cut_windows_drops_the_remainder():
 
 @pytest.mark.parametrize(
     "content, expected",
-    [(b"", "not a readable audio file"), (b"this is not audio at all" * 10, "not a readable audio file")],
+    [
+        (b"", "not a readable audio file"),
+        (b"this is not audio at all" * 10, "not a readable audio file"),
+    ],
 )
 def test_bad_audio_files_give_one_clear_line(tmp_path, content, expected):
     path = tmp_path / "bad.wav"

@@ -29,13 +29,26 @@ def run_json(capsys, *argv):
 
 
 def test_eval_audio_both_protocols_end_to_end(small_library, capsys):
-    temporal = run_json(capsys, "eval", "audio", str(small_library), "--protocol", "temporal", "--method", "paper", "--rate", "16000")
+    temporal = run_json(
+        capsys,
+        "eval",
+        "audio",
+        str(small_library),
+        "--protocol",
+        "temporal",
+        "--method",
+        "paper",
+        "--rate",
+        "16000",
+    )
     assert temporal["protocol"] == "temporal" and temporal["method"] == "paper"
     # 58.7 s, 39.9 s and 60.0 s at 5 s windows: 11 + 7 + 12 windows, the first 60 % of each train
     assert temporal["n_test"] == (11 - 6) + (7 - 4) + (12 - 7)
     assert set(temporal["per_class"]) == {"cafe", "street", "vehicle"}
     assert 0.0 <= temporal["balanced_accuracy"] <= 1.0 and temporal["log_loss"] >= 0
-    recording = run_json(capsys, "eval", "audio", str(small_library), "--protocol", "recording", "--rate", "16000")
+    recording = run_json(
+        capsys, "eval", "audio", str(small_library), "--protocol", "recording", "--rate", "16000"
+    )
     # one recording per scene: each left-out scene is absent from its training set
     assert recording["n_test"] == 11 + 7 + 12
     assert recording["accuracy"] == 0.0
@@ -52,7 +65,15 @@ def test_train_predict_and_table(small_library, tmp_path, capsys):
     summary = run_json(capsys, "train", str(small_library), "-o", str(model), "--rate", "16000")
     assert model.is_file() and summary["acoustic"]["scenes"] == ["cafe", "street", "vehicle"]
     picture = sorted((small_library / "street").glob("*.jpg"))[0]
-    out = run_json(capsys, "predict", str(model), "--audio", str(small_library / "street" / "moodist-traffic.mp3"), "--image", str(picture))
+    out = run_json(
+        capsys,
+        "predict",
+        str(model),
+        "--audio",
+        str(small_library / "street" / "moodist-traffic.mp3"),
+        "--image",
+        str(picture),
+    )
     assert len(out["acoustic"]) == 7 and out["visual"][0]["picture"] == str(picture)
     assert out["decision"]["line"].endswith("detected")
     assert (out["decision"]["line"] == "No scene detected") == (out["decision"]["scene"] is None)
@@ -113,6 +134,12 @@ def test_predict_with_a_foreign_model_and_a_non_picture(tmp_path, capsys):
 
 
 def test_console_script_lists_subcommands():
-    out = subprocess.run([sys.executable, "-m", "servant_tui", "--help"], capture_output=True, text=True, cwd=REPO, check=True).stdout
+    out = subprocess.run(
+        [sys.executable, "-m", "servant_tui", "--help"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        check=True,
+    ).stdout
     for command in ("train", "predict", "eval", "table"):
         assert command in out

@@ -9,7 +9,14 @@ def decisions(events):
     return [e for e in events if isinstance(e, Decision)]
 
 
-@pytest.mark.parametrize("scene, line", [("coffee", "CoffeeScene detected"), ("coffee_shop", "CoffeeShopScene detected"), (None, "No scene detected")])
+@pytest.mark.parametrize(
+    "scene, line",
+    [
+        ("coffee", "CoffeeScene detected"),
+        ("coffee_shop", "CoffeeShopScene detected"),
+        (None, "No scene detected"),
+    ],
+)
 def test_scene_line(scene, line):
     assert scene_line(scene) == line
 
@@ -64,7 +71,9 @@ def test_unknown_sound_opens_no_window_and_pictures_are_paced():
     assert fusion.on_acoustic(UNKNOWN, 50.0, 0.0) == []
     assert not fusion.wants_picture(0.0)
     [state] = fusion.on_acoustic("cafe", 90.0, 1.0)
-    assert isinstance(state, FusionState) and state.phase == "looking" and state.seconds_left == 30.0
+    assert (
+        isinstance(state, FusionState) and state.phase == "looking" and state.seconds_left == 30.0
+    )
     assert fusion.wants_picture(1.0)
     fusion.on_visual("street", 80.0, 1.0)
     assert not fusion.wants_picture(2.5) and fusion.wants_picture(3.0)

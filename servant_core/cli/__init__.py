@@ -19,6 +19,7 @@ from servant_core.errors import ServantError
 
 SUBCOMMAND_MODULES = (
     "servant_core.cli.recognition",
+    "servant_core.cli.arm",
     "servant_core.cli.live",
 )
 

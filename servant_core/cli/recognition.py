@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from servant_core.audio import DEFAULT_RATE, DEFAULT_WINDOW_SECONDS, cut_windows, read_audio
 from servant_core.cli import emit
@@ -22,7 +22,14 @@ from servant_core.evaluate import (
 from servant_core.fusion import POLICIES, FusionConfig
 from servant_core.library import SceneLibrary, featurize_recordings, read_picture, read_pictures
 from servant_core.modelfile import load_model, save_model
-from servant_core.recognisers import ACOUSTIC_METHODS, VISUAL_METHODS, Recogniser, make_recogniser
+from servant_core.recognisers import (
+    ACOUSTIC_METHODS,
+    VISUAL_METHODS,
+    AcousticRecogniser,
+    Recogniser,
+    make_audio_recogniser,
+    make_recogniser,
+)
 from servant_core.storage import data_dir
 
 
@@ -142,7 +149,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     recognisers: dict[str, Recogniser] = {}
     summary: dict[str, Any] = {"root": str(args.root), "warnings": []}
     if len({r.scene for r in library.recordings}) >= 2:
-        audio = make_recogniser("audio", args.audio_method, **_audio_params(args))
+        audio = make_audio_recogniser(args.audio_method, **_audio_params(args))
         wf = featurize_recordings(
             library.recordings, audio.featurize, args.rate, args.window, on_error
         )
@@ -194,8 +201,8 @@ def cmd_predict(args: argparse.Namespace) -> int:
     lines: list[str] = []
     first_acoustic: tuple[str, float] | None = None
     if args.audio is not None:
-        audio = _role(model, "acoustic", args.model)
-        rate, seconds = audio.rate, audio.window_seconds  # type: ignore[attr-defined]
+        audio = cast(AcousticRecogniser, _role(model, "acoustic", args.model))
+        rate, seconds = audio.rate, audio.window_seconds
         windows = cut_windows(read_audio(args.audio, rate), rate, seconds)
         if len(windows) == 0:
             raise ServantError(
@@ -248,7 +255,8 @@ def _role(model: dict[str, Recogniser], role: str, path: Path) -> Recogniser:
 
 def _format_scores(result: dict[str, Any]) -> str:
     lines = [
-        f"{result['sense']} method={result['method']} protocol={result['protocol']} n_test={result['n_test']}",
+        f"{result['sense']} method={result['method']} protocol={result['protocol']} "
+        f"n_test={result['n_test']}",
         f"accuracy           {result['accuracy']:.3f}",
         f"balanced accuracy  {result['balanced_accuracy']:.3f}",
         f"log loss           {result['log_loss']:.3f}",
@@ -289,7 +297,8 @@ def cmd_eval_fusion(args: argparse.Namespace) -> int:
         _warn,
     )
     text = (
-        f"fusion policy={result['policy']} methods={result['method']} scenes={','.join(result['scenes'])}\n"
+        f"fusion policy={result['policy']} methods={result['method']} "
+        f"scenes={','.join(result['scenes'])}\n"
         f"windows {result['n_test']}  decided {result['decision_rate']:.3f}  "
         f"right when decided {result['precision']:.3f}  accuracy {result['accuracy']:.3f}"
     )

@@ -33,8 +33,13 @@ def dominant_colours(
     h, w = image_bgr.shape[:2]
     if w * h > thumb[0] * thumb[1]:
         image_bgr = cv2.resize(image_bgr, thumb, interpolation=cv2.INTER_AREA)
-    pixels = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2RGB).reshape(-1, 3).astype(np.float32)
-    distinct = np.unique(pixels, axis=0)
+    rgb = np.asarray(cv2.cvtColor(image_bgr, cv2.COLOR_BGR2RGB)).reshape(-1, 3).astype(np.uint32)
+    pixels = rgb.astype(np.float32)
+    # distinct colours via packed 24-bit integers: a 1-D unique is ~20x faster than axis=0
+    packed = np.unique((rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2])
+    distinct = np.stack([packed >> 16, (packed >> 8) & 255, packed & 255], axis=1).astype(
+        np.float32
+    )
     k = min(n_colours, len(distinct))
     if k == len(distinct):
         centres = distinct
@@ -42,7 +47,9 @@ def dominant_colours(
     else:
         cv2.setRNGSeed(seed)
         criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.5)
-        _, labels, centres = cv2.kmeans(pixels, k, None, criteria, 1, cv2.KMEANS_PP_CENTERS)
+        _, labels, centres = cv2.kmeans(  # type: ignore[call-overload]
+            pixels, k, None, criteria, 1, cv2.KMEANS_PP_CENTERS
+        )
         labels = labels.ravel()
     counts = np.bincount(labels, minlength=k).astype(float)
     order = np.argsort(-counts, kind="stable")

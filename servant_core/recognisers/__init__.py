@@ -2,22 +2,26 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 from servant_core.errors import ServantError
-from servant_core.recognisers.base import UNKNOWN, Recogniser
+from servant_core.recognisers.base import UNKNOWN, AcousticRecogniser, Recogniser
 from servant_core.recognisers.paper import PaperAcousticRecogniser, PaperVisualRecogniser
 
-ACOUSTIC_METHODS: dict[str, type] = {"paper": PaperAcousticRecogniser}
-VISUAL_METHODS: dict[str, type] = {"paper": PaperVisualRecogniser}
+ACOUSTIC_METHODS: dict[str, type[Recogniser]] = {"paper": PaperAcousticRecogniser}
+VISUAL_METHODS: dict[str, type[Recogniser]] = {"paper": PaperVisualRecogniser}
 
 
-def methods_for(sense: str) -> dict[str, type]:
+def methods_for(sense: str) -> dict[str, type[Recogniser]]:
     if sense == "audio":
         return ACOUSTIC_METHODS
     if sense == "image":
         return VISUAL_METHODS
     raise ValueError(f"unknown sense {sense!r}")
+
+
+def make_audio_recogniser(method: str, **params: Any) -> AcousticRecogniser:
+    return cast(AcousticRecogniser, make_recogniser("audio", method, **params))
 
 
 def make_recogniser(sense: str, method: str, **params: Any) -> Recogniser:
@@ -31,9 +35,11 @@ def make_recogniser(sense: str, method: str, **params: Any) -> Recogniser:
 
 __all__ = [
     "ACOUSTIC_METHODS",
+    "AcousticRecogniser",
     "UNKNOWN",
     "VISUAL_METHODS",
     "Recogniser",
+    "make_audio_recogniser",
     "make_recogniser",
     "methods_for",
 ]

@@ -33,7 +33,7 @@ class Recogniser(Protocol):
     scenes_: list[str]
 
     def featurize(self, items: Any) -> np.ndarray: ...
-    def fit(self, X: np.ndarray, scenes: Sequence[str]) -> Self: ...
+    def fit(self, X: np.ndarray, scenes: Sequence[str] | np.ndarray) -> Self: ...
     def predict(self, X: np.ndarray) -> np.ndarray: ...
     def confidence(self, X: np.ndarray) -> np.ndarray: ...
     def predict_proba(self, X: np.ndarray) -> np.ndarray: ...
@@ -41,6 +41,13 @@ class Recogniser(Protocol):
 
     @classmethod
     def from_state(cls, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> Self: ...
+
+
+class AcousticRecogniser(Recogniser, Protocol):
+    """An audio recogniser also says at what rate and window length it featurizes windows."""
+
+    rate: int
+    window_seconds: float
 
 
 @dataclass
@@ -65,7 +72,9 @@ class ClusterLabels:
         return lines
 
 
-def label_clusters(clusters: np.ndarray, scenes: Sequence[str], n_clusters: int) -> ClusterLabels:
+def label_clusters(
+    clusters: np.ndarray, scenes: Sequence[str] | np.ndarray, n_clusters: int
+) -> ClusterLabels:
     """Give each cluster the scene most of its members carry (pure; ties give None)."""
     cluster_scene: list[str | None] = []
     tied: list[int] = []
@@ -86,7 +95,7 @@ def label_clusters(clusters: np.ndarray, scenes: Sequence[str], n_clusters: int)
     return ClusterLabels(cluster_scene, tied, empty, unowned)
 
 
-def check_training_scenes(scenes: Sequence[str], n_rows: int) -> list[str]:
+def check_training_scenes(scenes: Sequence[str] | np.ndarray, n_rows: int) -> list[str]:
     """The sorted distinct scenes; K-Means with one cluster per scene needs at least two."""
     if len(scenes) != n_rows:
         raise ValueError(f"{n_rows} feature rows but {len(scenes)} scene labels")
@@ -103,13 +112,17 @@ def cluster_spreads(X: np.ndarray, clusters: np.ndarray, centres: np.ndarray) ->
     """Root-mean-square distance of each cluster's members to their centre (its own spread).
 
     An empty or single-member cluster takes the median spread of the others, so it is neither
-    infinitely sharp nor infinitely vague.
+    infinitely sharp nor infinitely vague. Distances are taken row by row against the centres
+    (an (n, K) matrix), never as a copy of the members: X can be hundreds of megabytes.
     """
+    from sklearn.metrics.pairwise import euclidean_distances
+
+    own = euclidean_distances(X, centres)[np.arange(len(X)), clusters]
     spreads = np.full(len(centres), np.nan)
     for c in range(len(centres)):
-        members = X[clusters == c]
+        members = own[clusters == c]
         if len(members) > 1:
-            spreads[c] = np.sqrt(np.mean(np.sum((members - centres[c]) ** 2, axis=1)))
+            spreads[c] = np.sqrt(np.mean(members.astype(float) ** 2))
     fallback = np.nanmedian(spreads) if np.any(np.isfinite(spreads)) else 1.0
     spreads[~np.isfinite(spreads) | (spreads <= 0)] = fallback if fallback > 0 else 1.0
     return spreads

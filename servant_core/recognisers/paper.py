@@ -44,10 +44,14 @@ class KMeansSceneRecogniser:
     random_state: int | None
     n_init: int
 
-    def fit(self, X: np.ndarray, scenes: Sequence[str]) -> Self:
+    def fit(self, X: np.ndarray, scenes: Sequence[str] | np.ndarray) -> Self:
         self.scenes_ = check_training_scenes(scenes, len(X))
         kmeans = KMeans(
-            n_clusters=len(self.scenes_), n_init=self.n_init, random_state=self.random_state
+            n_clusters=len(self.scenes_),
+            n_init=self.n_init,
+            random_state=self.random_state,
+            # centre X in place and put it back (float rounding aside) instead of copying it
+            copy_x=False,
         )
         clusters = kmeans.fit_predict(X)
         self.centres_ = kmeans.cluster_centers_.astype(np.float32)

@@ -1,0 +1,1 @@
+"""What the arm does in each scene: teach records, and the learner from perceived scene to pose."""

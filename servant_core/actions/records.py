@@ -1,0 +1,171 @@
+"""Teach records: what the engine perceived (every scene's score, per sense) and the pose taught.
+
+They live in one JSON file (default `data_dir()/teach/records.json`), rewritten atomically on each
+new record. A file from an older version is read and migrated (its original is kept beside it as
+`.v<N>.bak` before the first rewrite); a broken or newer file is refused and never overwritten.
+
+Version 1 is the paper's shape: a scene label and one servo angle (`{"scene", "action", "t"}`).
+It becomes a pose for one joint (`legacy_joint`) and one-hot scores over the file's scenes.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from servant_core.errors import ServantError
+from servant_core.storage import atomic_write_bytes, atomic_write_json, data_dir
+
+FORMAT = "servant-teach-records"
+VERSION = 2
+SENSES = ("acoustic", "visual")
+SOURCES = ("typed", "recorded", "perceived")
+
+
+@dataclass(frozen=True)
+class TeachRecord:
+    scene: str
+    scores: dict[str, dict[str, float]]  # {"acoustic": {scene: score}, "visual": {scene: score}}
+    pose: dict[str, float]  # degrees per joint
+    t: float  # when it was taught, seconds since the epoch
+    source: str = "typed"  # typed by the user, recorded by guiding the arm, or perceived live
+    notes: list[str] = field(default_factory=list)
+
+
+def one_hot(scene: str, scenes: Iterable[str]) -> dict[str, float]:
+    return {s: float(s == scene) for s in sorted({*scenes, scene})}
+
+
+def label_scores(scene: str, scenes: Iterable[str]) -> dict[str, dict[str, float]]:
+    """Scores for a scene the user typed (not perceived): certain, for both senses."""
+    scores = one_hot(scene, scenes)
+    return {sense: dict(scores) for sense in SENSES}
+
+
+def default_records_path() -> Path:
+    return data_dir() / "teach" / "records.json"
+
+
+def _finite_map(value: Any, what: str) -> dict[str, float]:
+    if not isinstance(value, Mapping) or not value:
+        raise ValueError(f"{what} must be a non-empty object of numbers")
+    out = {}
+    for key, number in value.items():
+        if (
+            isinstance(number, bool)
+            or not isinstance(number, int | float)
+            or not math.isfinite(number)
+        ):
+            raise ValueError(f"{what}[{key!r}] is not a finite number")
+        out[str(key)] = float(number)
+    return out
+
+
+def _record(raw: Any) -> TeachRecord:
+    if not isinstance(raw, Mapping):
+        raise ValueError("not an object")
+    scene = raw.get("scene")
+    if not isinstance(scene, str) or not scene:
+        raise ValueError("no scene label")
+    scores = raw.get("scores")
+    if not isinstance(scores, Mapping) or not set(scores) <= set(SENSES) or not scores:
+        raise ValueError(f"scores must be an object with {' and/or '.join(SENSES)}")
+    source = raw.get("source", "typed")
+    if source not in SOURCES:
+        raise ValueError(f"source {source!r} is unknown")
+    t = raw.get("t", 0.0)
+    if not isinstance(t, int | float):
+        raise ValueError("t is not a time")
+    notes = raw.get("notes", [])
+    return TeachRecord(
+        scene=scene,
+        scores={s: _finite_map(v, f"scores[{s!r}]") for s, v in scores.items()},
+        pose=_finite_map(raw.get("pose"), "pose"),
+        t=float(t),
+        source=source,
+        notes=[str(n) for n in notes] if isinstance(notes, list) else [],
+    )
+
+
+def _migrate_v1(raw_records: Sequence[Any], legacy_joint: str) -> list[dict[str, Any]]:
+    scenes: set[str] = {
+        r["scene"]
+        for r in raw_records
+        if isinstance(r, Mapping) and isinstance(r.get("scene"), str)
+    }
+    return [
+        {
+            "scene": r.get("scene"),
+            "scores": label_scores(r["scene"], scenes) if isinstance(r.get("scene"), str) else None,
+            "pose": {legacy_joint: r.get("action")},
+            "t": r.get("t", 0.0),
+        }
+        if isinstance(r, Mapping)
+        else r
+        for r in raw_records
+    ]
+
+
+def _read(path: Path, legacy_joint: str) -> tuple[int, list[TeachRecord]]:
+    fix = "fix or move the file away (Servant never overwrites it)"
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ServantError(f"{path}: not a readable teach record file ({exc}); {fix}") from exc
+    if not isinstance(data, Mapping) or data.get("format") != FORMAT:
+        raise ServantError(f"{path}: not a Servant teach record file; {fix}")
+    version = data.get("version")
+    if not isinstance(version, int) or not 1 <= version <= VERSION:
+        raise ServantError(
+            f"{path}: teach record version {version!r} is not one this Servant reads "
+            f"(1..{VERSION}); "
+            "upgrade Servant"
+        )
+    raw_records = data.get("records")
+    if not isinstance(raw_records, list):
+        raise ServantError(f"{path}: no list of records; {fix}")
+    if version == 1:
+        raw_records = _migrate_v1(raw_records, legacy_joint)
+    records = []
+    for i, raw in enumerate(raw_records):
+        try:
+            records.append(_record(raw))
+        except ValueError as exc:
+            raise ServantError(f"{path}: record {i + 1}: {exc}; {fix}") from exc
+    return version, records
+
+
+def load_records(
+    path: str | Path | None = None, legacy_joint: str = "shoulder"
+) -> list[TeachRecord]:
+    """Every record in `path` (default `default_records_path()`); none if there is no file."""
+    path = Path(path) if path is not None else default_records_path()
+    if not path.exists():
+        return []
+    return _read(path, legacy_joint)[1]
+
+
+def save_records(records: Sequence[TeachRecord], path: str | Path | None = None) -> Path:
+    path = Path(path) if path is not None else default_records_path()
+    payload = {"format": FORMAT, "version": VERSION, "records": [asdict(r) for r in records]}
+    return atomic_write_json(path, payload)
+
+
+def append_record(
+    record: TeachRecord, path: str | Path | None = None, legacy_joint: str = "shoulder"
+) -> list[TeachRecord]:
+    """Add `record` to the file, atomically; returns every record now in it."""
+    path = Path(path) if path is not None else default_records_path()
+    _record(asdict(record))  # the same checks a reader applies: never write what cannot be read
+    version, records = _read(path, legacy_joint) if path.exists() else (VERSION, [])
+    if version < VERSION:
+        backup = path.with_name(f"{path.name}.v{version}.bak")
+        if not backup.exists():
+            atomic_write_bytes(backup, path.read_bytes())
+    records.append(record)
+    save_records(records, path)
+    return records

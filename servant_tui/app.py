@@ -1,0 +1,251 @@
+"""The Servant terminal application: the engine is handed in, the screens show what it emits."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any, Protocol
+
+from rich.markup import escape
+from textual import on, work
+from textual.app import App, SystemCommand
+from textual.binding import Binding
+from textual.screen import Screen
+from textual.worker import Worker, WorkerState
+
+from servant_core.errors import ServantError
+from servant_core.events import (
+    AcousticPrediction,
+    ArmState,
+    Decision,
+    DeviceStatus,
+    ErrorEvent,
+    SpectrumFrame,
+    UnknownScene,
+    VisualPrediction,
+)
+from servant_core.storage import data_dir
+from servant_tui.messages import EngineEvent, SpectrumUpdate
+from servant_tui.screens.dialogs import HelpScreen, LabelPrompt
+from servant_tui.screens.live import LiveScreen, device_message
+from servant_tui.widgets.text import clock
+
+
+class EngineLike(Protocol):
+    """What the application asks of the engine (`servant_core.engine.Engine` or a test replay)."""
+
+    def subscribe(self, callback: Callable[[Any], None]) -> Any: ...
+    def start(self) -> None: ...
+    def stop(self) -> None: ...
+    def arm(self) -> None: ...
+    def disarm(self) -> None: ...
+    def label_unknown(self, window_id: str, scene: str) -> None: ...
+
+
+def default_library_root() -> Path:
+    return data_dir() / "library"
+
+
+class ServantApp(App[None]):
+    TITLE = "Servant"
+    CSS_PATH = "app.tcss"
+    BINDINGS = [
+        Binding("a", "toggle_arm", "Arm/Disarm"),
+        Binding("t", "teach", "Teach"),
+        Binding("l", "library", "Library"),
+        Binding("s", "settings", "Settings"),
+        Binding("question_mark,f1", "help", "Help", key_display="?"),
+        Binding("q", "quit", "Quit"),
+    ]
+
+    def __init__(
+        self,
+        engine: EngineLike,
+        *,
+        mode: str = "live",
+        library_root: Path | None = None,
+        settings: Any = None,
+    ) -> None:
+        super().__init__()
+        self.engine = engine
+        self.sub_title = "demo scenes" if mode == "demo" else "live devices"
+        self.library_root = (
+            library_root or getattr(engine, "library_root", None) or default_library_root()
+        )
+        self.settings = settings
+        self.arm_state: ArmState | None = None
+        self.known_scenes: set[str] = set()
+        self.live = LiveScreen()
+        self._prompt_open = False
+        engine.subscribe(self._from_engine)
+
+    # -- the engine side -------------------------------------------------------------------------
+
+    def _from_engine(self, event: Any) -> None:
+        """Called on engine threads: hand the event to the UI thread as a message, nothing more."""
+        if isinstance(event, SpectrumFrame):
+            self.post_message(SpectrumUpdate(event))
+        else:
+            self.post_message(EngineEvent(event))
+
+    def get_default_screen(self) -> Screen[Any]:
+        return self.live
+
+    def on_mount(self) -> None:
+        self.start_engine()
+
+    @work(thread=True, exclusive=True, group="engine", exit_on_error=False)
+    def start_engine(self) -> None:
+        self.engine.start()
+
+    def on_unmount(self) -> None:
+        # Joining the engine's threads closes the audio stream, the camera and the serial port.
+        self.engine.stop()
+
+    @on(SpectrumUpdate)
+    def _spectrum(self, message: SpectrumUpdate) -> None:
+        for screen in self._event_screens():
+            screen.show_event(message.frame)
+
+    @on(EngineEvent)
+    def _event(self, message: EngineEvent) -> None:
+        event = message.event
+        if isinstance(event, ArmState):
+            changed = self.arm_state is None or (
+                (self.arm_state.armed, self.arm_state.connected) != (event.armed, event.connected)
+            )
+            self.arm_state = event
+            if changed:
+                self.refresh_bindings()
+                self.log_line(event.t, self._arm_line(event))
+        elif isinstance(event, (AcousticPrediction, VisualPrediction)) and event.scene:
+            self.known_scenes.add(event.scene)
+        line = self._log_text(event)
+        if line:
+            self.log_line(event.t, line)
+        if isinstance(event, ErrorEvent):
+            self.notify(event.message, title="Servant", severity="error")
+        elif isinstance(event, DeviceStatus) and not event.ok:
+            self.notify(f"{event.device}: {device_message(event)}", severity="warning")
+        elif isinstance(event, UnknownScene):
+            self._ask_label(event)
+        for screen in self._event_screens():
+            screen.show_event(event)
+
+    def _event_screens(self) -> Iterable[Any]:
+        return [s for s in self.screen_stack if hasattr(s, "show_event")]
+
+    @staticmethod
+    def _log_text(event: Any) -> str | None:
+        if isinstance(event, Decision):
+            if event.scene:
+                return f"[bold green]{escape(event.line)}[/] ({event.confidence:.1f} %)"
+            return f"[yellow]{escape(event.line)}[/]"
+        if isinstance(event, AcousticPrediction):
+            return f"hears {escape(event.scene or 'an unknown place')} ({event.confidence:.1f} %)"
+        if isinstance(event, VisualPrediction):
+            return f"sees {escape(event.scene or 'an unknown place')} ({event.confidence:.1f} %)"
+        if isinstance(event, UnknownScene):
+            nearest = f", nearest {escape(event.nearest_scene)}" if event.nearest_scene else ""
+            return f"[magenta]unknown place ({event.sense}{nearest}): asking for a label[/]"
+        if isinstance(event, DeviceStatus):
+            style = "dim" if event.ok else "red"
+            return f"[{style}]{event.device}: {escape(device_message(event))}[/]"
+        if isinstance(event, ErrorEvent):
+            return f"[bold red]{escape(event.message)}[/]"
+        return None
+
+    @staticmethod
+    def _arm_line(state: ArmState) -> str:
+        if not state.connected:
+            return "[red]arm not connected[/]"
+        return "[bold red]arm ARMED[/]" if state.armed else "arm disarmed"
+
+    def log_line(self, t: float | None, line: str) -> None:
+        stamp = f"[dim]{clock(t)}[/] " if t is not None else ""
+        self.live.write_log(stamp + line)
+
+    def report_error(self, error: BaseException) -> None:
+        """Errors a user can cause go to the log and a notification; the application stays up."""
+        text = str(error) if isinstance(error, ServantError) else f"{type(error).__name__}: {error}"
+        self.log_line(None, f"[bold red]{escape(text)}[/]")
+        self.notify(text, title="Servant", severity="error", timeout=8)
+
+    def on_worker_state_changed(self, event: Worker.StateChanged) -> None:
+        if event.state == WorkerState.ERROR and event.worker.error is not None:
+            self.report_error(event.worker.error)
+
+    # -- open set: ask the user to name a place ---------------------------------------------------
+
+    def _ask_label(self, event: UnknownScene) -> None:
+        if self._prompt_open:
+            return
+        self._prompt_open = True
+
+        def answered(scene: str | None) -> None:
+            self._prompt_open = False
+            if scene:
+                self.label_unknown(event.window_id, scene)
+
+        self.push_screen(LabelPrompt(event, sorted(self.known_scenes)), answered)
+
+    @work(thread=True, group="label", exit_on_error=False)
+    def label_unknown(self, window_id: str, scene: str) -> None:
+        self.engine.label_unknown(window_id, scene)
+        self.call_from_thread(self.log_line, None, f"labelled the unknown place as {escape(scene)}")
+
+    # -- actions ----------------------------------------------------------------------------------
+
+    def action_toggle_arm(self) -> None:
+        self.toggle_arm(not (self.arm_state is not None and self.arm_state.armed))
+
+    @work(thread=True, exclusive=True, group="arm", exit_on_error=False)
+    def toggle_arm(self, armed: bool) -> None:
+        if armed:
+            self.engine.arm()
+        else:
+            self.engine.disarm()
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        if action == "toggle_arm":
+            return self.arm_state is not None and self.arm_state.connected
+        return True
+
+    def action_help(self) -> None:
+        if not isinstance(self.screen, HelpScreen):
+            self.push_screen(HelpScreen())
+
+    def action_teach(self) -> None:
+        from servant_tui.screens.teach import TeachScreen
+
+        self._open(TeachScreen)
+
+    def action_library(self) -> None:
+        from servant_tui.screens.library import LibraryScreen
+
+        self._open(LibraryScreen)
+
+    def action_settings(self) -> None:
+        from servant_tui.screens.settings import SettingsScreen
+
+        self._open(SettingsScreen)
+
+    def _open(self, screen_type: type[Screen[Any]]) -> None:
+        """Open a screen over the live one, replacing another secondary screen if one is open."""
+        if isinstance(self.screen, screen_type):
+            return
+        while len(self.screen_stack) > 1:
+            self.pop_screen()
+        self.push_screen(screen_type())
+
+    def get_system_commands(self, screen: Screen[Any]) -> Iterable[SystemCommand]:
+        yield from super().get_system_commands(screen)
+        yield SystemCommand(
+            "Arm or disarm", "Toggle whether the arm may move", self.action_toggle_arm
+        )
+        yield SystemCommand("Teach", "Teach a scene and its pose, then train", self.action_teach)
+        yield SystemCommand(
+            "Library", "Scenes, recordings and pictures; retrain, evaluate", self.action_library
+        )
+        yield SystemCommand("Settings", "Devices, joints and fusion windows", self.action_settings)
+        yield SystemCommand("Keys", "Show the help screen", self.action_help)

@@ -1,0 +1,204 @@
+"""The library screen: scenes, their recordings and pictures; relabel, delete, retrain, evaluate."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from rich.table import Table
+from textual import on, work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.screen import Screen
+from textual.widgets import DataTable, Footer, Header, Static
+
+from servant_core.errors import ServantError
+from servant_core.evaluate import evaluate_audio
+from servant_core.library import SceneLibrary
+from servant_tui.messages import EvaluationDone, RetrainDone
+from servant_tui.screens.dialogs import Confirm, ScenePrompt
+
+
+def free_path(folder: Path, name: str) -> Path:
+    """`folder/name`, or `folder/stem-2.suffix` and so on if taken: nothing is overwritten."""
+    candidate = folder / name
+    stem, suffix = Path(name).stem, Path(name).suffix
+    n = 2
+    while candidate.exists():
+        candidate = folder / f"{stem}-{n}{suffix}"
+        n += 1
+    return candidate
+
+
+def evaluation_table(result: dict) -> Table:
+    table = Table(title=f"{result['protocol']} protocol, {result['method']} method", expand=False)
+    table.add_column("measure")
+    table.add_column("value", justify="right")
+    table.add_row("accuracy", f"{100 * result['accuracy']:.1f} %")
+    table.add_row("balanced accuracy", f"{100 * result['balanced_accuracy']:.1f} %")
+    for scene, recall in sorted(result["per_class"].items()):
+        table.add_row(f"recall {scene}", f"{100 * recall:.1f} %")
+    table.add_row("test windows", str(result["n_test"]))
+    return table
+
+
+class LibraryScreen(Screen[None]):
+    BINDINGS = [
+        Binding("escape", "app.pop_screen", "Back"),
+        Binding("d", "delete", "Delete sample"),
+        Binding("r", "relabel", "Relabel sample"),
+        Binding("R", "retrain", "Retrain"),
+        Binding("e", "evaluate", "Evaluate"),
+    ]
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.library: SceneLibrary | None = None
+        self.scene: str | None = None
+        self.evaluation: dict | None = None
+
+    def compose(self) -> ComposeResult:
+        yield Header()
+        with Horizontal(id="library"):
+            with Vertical(id="library-left"):
+                yield DataTable(id="scenes", cursor_type="row")
+                yield Static(id="evaluation")
+            yield DataTable(id="samples", cursor_type="row")
+        yield Static(id="library-status")
+        yield Footer()
+
+    def on_mount(self) -> None:
+        self.query_one("#scenes").border_title = "Scenes"
+        self.query_one("#samples").border_title = "Samples"
+        self.query_one("#evaluation").border_title = "Evaluation"
+        self.query_one("#scenes", DataTable).add_columns("scene", "recordings", "pictures")
+        self.query_one("#samples", DataTable).add_columns("kind", "file", "kB")
+        self.rescan()
+
+    @property
+    def root(self) -> Path:
+        return self.app.library_root
+
+    def status(self, text: str) -> None:
+        self.query_one("#library-status", Static).update(text)
+
+    def rescan(self) -> None:
+        scenes = self.query_one("#scenes", DataTable)
+        scenes.clear()
+        try:
+            self.library = SceneLibrary.scan(self.root)
+        except ServantError:
+            self.library = SceneLibrary(self.root, [])
+            self.status(f"{self.root}: empty — teach a scene (t) to start the library")
+            self.show_samples(None)
+            return
+        for scene in self.library.scenes:
+            n_recordings = sum(r.scene == scene for r in self.library.recordings)
+            n_pictures = sum(p.scene == scene for p in self.library.pictures)
+            scenes.add_row(scene, str(n_recordings), str(n_pictures), key=scene)
+        self.status(f"{self.root}: {len(self.library.scenes)} scenes")
+        if self.library.scenes:
+            keep = self.scene if self.scene in self.library.scenes else self.library.scenes[0]
+            scenes.move_cursor(row=self.library.scenes.index(keep))
+            self.show_samples(keep)
+        else:
+            self.show_samples(None)
+
+    @on(DataTable.RowHighlighted, "#scenes")
+    def scene_chosen(self, event: DataTable.RowHighlighted) -> None:
+        self.show_samples(event.row_key.value)
+
+    def show_samples(self, scene: str | None) -> None:
+        self.scene = scene
+        samples = self.query_one("#samples", DataTable)
+        samples.clear()
+        if scene is None or self.library is None:
+            return
+        items = [("recording", r.path) for r in self.library.recordings if r.scene == scene]
+        items += [("picture", p.path) for p in self.library.pictures if p.scene == scene]
+        for kind, path in items:
+            relative = path.relative_to(self.root / scene)
+            samples.add_row(kind, str(relative), f"{path.stat().st_size / 1024:.0f}", key=str(path))
+
+    def selected_sample(self) -> Path | None:
+        samples = self.query_one("#samples", DataTable)
+        if samples.row_count == 0:
+            return None
+        return Path(samples.coordinate_to_cell_key(samples.cursor_coordinate).row_key.value)
+
+    def action_delete(self) -> None:
+        path = self.selected_sample()
+        if path is None:
+            return
+
+        def confirmed(yes: bool | None) -> None:
+            if yes:
+                path.unlink(missing_ok=True)
+                self.app.log_line(None, f"deleted {path}")
+                self.rescan()
+
+        self.app.push_screen(Confirm(f"Delete {path.name} from {self.scene}?"), confirmed)
+
+    def action_relabel(self) -> None:
+        path = self.selected_sample()
+        if path is None or self.library is None:
+            return
+
+        def relabelled(scene: str | None) -> None:
+            if not scene or scene == self.scene:
+                return
+            if "/" in scene or scene.startswith("."):
+                self.app.report_error(
+                    ServantError(f"{scene!r}: a scene name cannot hold '/' or start with '.'")
+                )
+                return
+            folder = self.root / scene
+            folder.mkdir(parents=True, exist_ok=True)
+            target = free_path(folder, path.name)
+            os.replace(path, target)  # same file system: the sample is in one place or the other
+            self.app.log_line(None, f"moved {path.name} from {self.scene} to {scene}")
+            self.rescan()
+
+        self.app.push_screen(
+            ScenePrompt(
+                f"Relabel {path.name} as which scene?", self.library.scenes, self.scene or ""
+            ),
+            relabelled,
+        )
+
+    def action_retrain(self) -> None:
+        self.status("retraining the recognisers…")
+        self.retrain()
+
+    @work(thread=True, exclusive=True, group="retrain", exit_on_error=False)
+    def retrain(self) -> None:
+        library = SceneLibrary.scan(self.root)
+        self.app.engine.retrain(library)
+        self.post_message(
+            RetrainDone(
+                f"retrained on {len(library.scenes)} scenes, {len(library.recordings)} "
+                f"recordings, {len(library.pictures)} pictures"
+            )
+        )
+
+    @on(RetrainDone)
+    def retrained(self, message: RetrainDone) -> None:
+        self.status(message.summary)
+        self.app.log_line(None, message.summary)
+
+    def action_evaluate(self) -> None:
+        self.status("evaluating (temporal protocol)…")
+        self.evaluate()
+
+    @work(thread=True, exclusive=True, group="evaluate", exit_on_error=False)
+    def evaluate(self) -> None:
+        self.post_message(
+            EvaluationDone(evaluate_audio(SceneLibrary.scan(self.root), protocol="temporal"))
+        )
+
+    @on(EvaluationDone)
+    def evaluated(self, message: EvaluationDone) -> None:
+        self.evaluation = message.result
+        self.query_one("#evaluation", Static).update(evaluation_table(message.result))
+        self.status(f"evaluated {message.result['n_test']} test windows")

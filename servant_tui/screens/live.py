@@ -1,0 +1,103 @@
+"""The live screen: spectrum, colours, scene, arm and the event log, side by side."""
+
+from __future__ import annotations
+
+from rich.markup import escape
+from textual.app import ComposeResult
+from textual.containers import Grid
+from textual.screen import Screen
+from textual.widgets import Footer, Header, RichLog, Static
+
+from servant_core.events import ArmState, DeviceStatus, Palette, SpectrumFrame
+from servant_tui.widgets.arm import ArmPane
+from servant_tui.widgets.colours import ColoursPane
+from servant_tui.widgets.scene import ScenePane
+from servant_tui.widgets.spectrum import Spectrum
+
+DEVICES = ("microphone", "camera", "servo")
+
+
+def device_message(status: DeviceStatus) -> str:
+    """The status message without a repeat of the device's name in front."""
+    return status.message.removeprefix(f"{status.device}: ")
+
+
+class DeviceBar(Static):
+    """One line saying which devices work and which are missing."""
+
+    DEFAULT_CSS = """
+    DeviceBar { height: 1; padding: 0 1; background: $boost; }
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.statuses: dict[str, DeviceStatus] = {}
+
+    def on_mount(self) -> None:
+        self.update(self._render_statuses())
+
+    def show_status(self, status: DeviceStatus) -> None:
+        self.statuses[status.device] = status
+        self.update(self._render_statuses())
+
+    def _render_statuses(self) -> str:
+        parts = []
+        for device in DEVICES:
+            status = self.statuses.get(device)
+            if status is None:
+                parts.append(f"[dim]{device} …[/]")
+            elif status.ok:
+                parts.append(f"[green]{device} ✓[/] [dim]{escape(device_message(status))}[/]")
+            else:
+                parts.append(f"[bold red]{device} ✗[/] [red]{escape(device_message(status))}[/]")
+        return "   ".join(parts)
+
+
+class LiveScreen(Screen[None]):
+    """What the wearer sees while Servant runs; the base of the screen stack."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        # Built here, not in compose: engine events may arrive before the screen is mounted.
+        self.devices = DeviceBar()
+        self.spectrum = Spectrum(id="spectrum")
+        self.scene = ScenePane(id="scene")
+        self.colours = ColoursPane(id="colours")
+        self.arm = ArmPane(id="arm")
+        self.log_view = RichLog(id="log", max_lines=500, markup=True, wrap=True, min_width=20)
+        titles = (
+            (self.spectrum, "Spectrum"),
+            (self.scene, "Scene"),
+            (self.colours, "Colours"),
+            (self.arm, "Arm"),
+            (self.log_view, "Log"),
+        )
+        for pane, title in titles:
+            pane.border_title = title
+
+    def compose(self) -> ComposeResult:
+        yield Header()
+        yield self.devices
+        with Grid(id="panes"):
+            yield self.spectrum
+            yield self.scene
+            yield self.colours
+            yield self.arm
+            yield self.log_view
+        yield Footer()
+
+    def show_event(self, event: object) -> None:
+        if isinstance(event, SpectrumFrame):
+            self.spectrum.show_frame(event)
+        elif isinstance(event, Palette):
+            self.colours.show_palette(event)
+        elif isinstance(event, ArmState):
+            self.arm.show_state(event)
+            self.arm.border_title = "Arm · ARMED" if event.armed else "Arm"
+        elif isinstance(event, DeviceStatus):
+            self.devices.show_status(event)
+        else:
+            self.scene.show_event(event)
+
+    def write_log(self, line: str) -> None:
+        self.log_view.write(line)

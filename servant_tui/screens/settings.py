@@ -1,0 +1,136 @@
+"""The settings screen: devices, the arm's joints and the fusion windows (platformdirs)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from textual import on
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Grid, Horizontal, VerticalScroll
+from textual.screen import Screen
+from textual.widgets import Button, Footer, Header, Input, Label, Select, Static
+
+from servant_core.errors import ServantError
+
+DEVICE_FIELDS = (
+    ("audio_device", "audio input", "sounddevice name or index; empty: the default input"),
+    ("camera", "camera", "camera index, video file or image pattern; empty: index 0"),
+    ("serial_port", "serial port", "e.g. /dev/ttyACM0; empty: no arm"),
+)
+WINDOW_FIELDS = (
+    ("acoustic_window_s", "acoustic window (s)"),
+    ("confirm_window_s", "confirm window (s)"),
+    ("pictures_needed", "pictures needed"),
+    ("picture_interval_s", "picture interval (s)"),
+    ("confidence_threshold", "confidence threshold (%)"),
+)
+JOINT_FIELDS = ("min_angle", "max_angle", "max_speed_deg_s", "home_angle")
+
+
+def device_value(text: str) -> str | int | None:
+    """An empty field is "the default", digits are an index, anything else a name or a path."""
+    text = text.strip()
+    if not text:
+        return None
+    return int(text) if text.isdigit() else text
+
+
+def number(text: str, what: str, kind: type = float) -> Any:
+    try:
+        return kind(text.strip())
+    except ValueError:
+        raise ServantError(f"{what}: {text!r} is not a number; type one") from None
+
+
+class SettingsScreen(Screen[None]):
+    BINDINGS = [
+        Binding("escape", "app.pop_screen", "Back"),
+        Binding("ctrl+s", "save", "Save"),
+    ]
+
+    def compose(self) -> ComposeResult:
+        from servant_core.settings import PROTOCOLS, load_settings
+
+        settings = self.app.settings
+        if settings is None:
+            settings = self.app.settings = load_settings()
+        self.loaded = settings
+        yield Header()
+        with VerticalScroll(id="settings"):
+            yield Static("Devices", classes="section")
+            with Grid(classes="form"):
+                for name, label, hint in DEVICE_FIELDS:
+                    value = getattr(settings, name)
+                    yield Label(label)
+                    yield Input("" if value is None else str(value), placeholder=hint, id=name)
+                yield Label("protocol")
+                yield Select(
+                    [(p, p) for p in PROTOCOLS],
+                    value=settings.protocol,
+                    allow_blank=False,
+                    id="protocol",
+                )
+            yield Static("Joints (degrees, degrees per second)", classes="section")
+            with Grid(classes="joints"):
+                yield Label("joint")
+                for field in JOINT_FIELDS:
+                    yield Label(field.replace("_deg_s", "").replace("_", " "))
+                for joint in settings.joints:
+                    yield Label(f"{joint.name} (ch {joint.channel})")
+                    for field in JOINT_FIELDS:
+                        yield Input(
+                            f"{getattr(joint, field):g}", id=f"{joint.name}-{field}", type="number"
+                        )
+            yield Static("Fusion", classes="section")
+            with Grid(classes="form"):
+                for name, label in WINDOW_FIELDS:
+                    yield Label(label)
+                    yield Input(f"{getattr(settings, name):g}", id=name, type="number")
+            with Horizontal(classes="buttons"):
+                yield Button("Save", id="save", variant="primary")
+                yield Button("Back", id="back")
+        yield Footer()
+
+    def edited(self) -> Any:
+        """The settings as the form shows them (not yet checked)."""
+        values: dict[str, Any] = {}
+        for name, _, _ in DEVICE_FIELDS:
+            values[name] = device_value(self.query_one(f"#{name}", Input).value)
+        values["protocol"] = self.query_one("#protocol", Select).value
+        for name, label in WINDOW_FIELDS:
+            kind = int if name == "pictures_needed" else float
+            values[name] = number(self.query_one(f"#{name}", Input).value, label, kind)
+        values["joints"] = [
+            dataclasses.replace(
+                joint,
+                **{
+                    field: number(
+                        self.query_one(f"#{joint.name}-{field}", Input).value,
+                        f"{joint.name} {field}",
+                    )
+                    for field in JOINT_FIELDS
+                },
+            )
+            for joint in self.loaded.joints
+        ]
+        return dataclasses.replace(self.loaded, **values)
+
+    @on(Button.Pressed, "#save")
+    def action_save(self) -> None:
+        from servant_core.settings import save_settings
+
+        try:
+            settings = self.edited()
+            path = save_settings(settings)
+        except ServantError as error:
+            self.app.report_error(error)
+            return
+        self.app.settings = self.loaded = settings
+        self.app.log_line(None, f"settings saved to {path}")
+        self.notify(f"Saved to {path}. Devices change at the next start.", title="Settings")
+
+    @on(Button.Pressed, "#back")
+    def back(self) -> None:
+        self.app.pop_screen()

@@ -1,0 +1,426 @@
+"""Teach mode, step by step: scene, sound, pictures, pose, (repeat), train, test.
+
+Recordings and pictures go straight into the scene library (nothing is lost if the session ends);
+each pose becomes a teach record. Training shows the action learner's error falling as it goes.
+"""
+
+from __future__ import annotations
+
+import time
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from rich.text import Text
+from textual import on, work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Grid, Horizontal, Vertical
+from textual.screen import Screen
+from textual.widgets import (
+    Button,
+    ContentSwitcher,
+    DataTable,
+    Footer,
+    Header,
+    Input,
+    Label,
+    OptionList,
+    ProgressBar,
+    Select,
+    Sparkline,
+    Static,
+)
+
+from servant_core.audio import DEFAULT_WINDOW_SECONDS, write_wav
+from servant_core.errors import ServantError
+from servant_core.events import SpectrumFrame
+from servant_core.features.palette import dominant_colours
+from servant_core.library import SceneLibrary
+from servant_core.storage import atomic_write_bytes
+from servant_tui.messages import (
+    PictureTaken,
+    RecordingDone,
+    RetrainDone,
+    TrainingDone,
+    TrainingProgress,
+)
+from servant_tui.widgets.colours import share_strip
+from servant_tui.widgets.spectrum import Spectrum
+
+STEPS = (
+    ("scene", "1 Scene"),
+    ("sound", "2 Sound"),
+    ("pictures", "3 Pictures"),
+    ("pose", "4 Pose"),
+    ("train", "5 Train"),
+    ("test", "6 Test"),
+)
+
+
+def stamp() -> str:
+    return datetime.now().strftime("teach-%Y%m%d-%H%M%S-%f")
+
+
+class TeachScreen(Screen[None]):
+    BINDINGS = [
+        Binding("escape", "app.pop_screen", "Back"),
+        Binding("ctrl+n", "step(1)", "Next step"),
+        Binding("ctrl+b", "step(-1)", "Previous step"),
+    ]
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.scene: str | None = None
+        self.windows = 0
+        self.pictures = 0
+        self.errors: list[float] = []
+        self.learner: Any = None
+        self.spectrum = Spectrum(id="teach-spectrum")
+        self._recording_started: float | None = None
+
+    @property
+    def root(self) -> Path:
+        return self.app.library_root
+
+    def joints(self) -> list[str]:
+        """The connected arm's joints, else the configured ones."""
+        if self.app.arm_state is not None and self.app.arm_state.angles:
+            return list(self.app.arm_state.angles)
+        from servant_core.settings import load_settings
+
+        if self.app.settings is None:
+            try:
+                self.app.settings = load_settings()
+            except ServantError as error:
+                self.app.report_error(error)
+                return []
+        return [joint.name for joint in self.app.settings.joints]
+
+    def compose(self) -> ComposeResult:
+        scenes = SceneLibrary.scan(self.root).scenes if self.root.is_dir() else []
+        yield Header()
+        with Horizontal(id="teach"):
+            yield OptionList(*(label for _, label in STEPS), id="steps")
+            with ContentSwitcher(initial="scene", id="step"):
+                with Vertical(id="scene"):
+                    yield Label("Pick the scene you are in, or name a new one.")
+                    yield Select([(s, s) for s in scenes], prompt="known scenes", id="known")
+                    yield Input(placeholder="new scene name, e.g. CoffeeScene", id="new-scene")
+                    yield Button("Use this scene", id="use-scene", variant="primary")
+                with Vertical(id="sound"):
+                    yield Label(
+                        f"Record {DEFAULT_WINDOW_SECONDS:g} s of the place's sound. Record a few."
+                    )
+                    yield Button(
+                        f"Record {DEFAULT_WINDOW_SECONDS:g} s", id="record", variant="primary"
+                    )
+                    yield ProgressBar(
+                        total=DEFAULT_WINDOW_SECONDS, show_eta=False, id="record-progress"
+                    )
+                    yield self.spectrum
+                    yield Static(id="sound-status")
+                with Vertical(id="pictures"):
+                    yield Label(
+                        "Take pictures of the place (the camera's dominant colours are learnt)."
+                    )
+                    yield Button("Take picture", id="take-picture", variant="primary")
+                    yield Static(id="picture-status")
+                with Vertical(id="pose"):
+                    yield Label("The arm's pose for this scene: type the angles, or guide the arm.")
+                    with Grid(id="pose-form"):
+                        for joint in self.joints():
+                            yield Label(joint)
+                            yield Input(id=f"joint-{joint}", type="number", placeholder="degrees")
+                    with Horizontal(classes="buttons"):
+                        yield Button("Use the arm's pose", id="guided")
+                        yield Button("Add sample", id="add-sample", variant="primary")
+                        yield Button("Teach another scene", id="again")
+                    yield DataTable(id="samples", cursor_type="row")
+                with Vertical(id="train"):
+                    yield Label(
+                        "Learn scene → pose from every teach record; retrain the recognisers."
+                    )
+                    with Horizontal(classes="buttons"):
+                        yield Button("Train", id="train-learner", variant="primary")
+                        yield Button("Retrain recognisers", id="retrain")
+                    yield ProgressBar(show_eta=False, id="train-progress")
+                    yield Sparkline([], id="error-curve")
+                    yield Static(id="train-status")
+                with Vertical(id="test"):
+                    yield Label("What the arm would do in each taught scene:")
+                    yield DataTable(id="predictions")
+        yield Footer()
+
+    def on_mount(self) -> None:
+        self.query_one("#error-curve").border_title = "training error (degrees)"
+        self.query_one("#samples", DataTable).add_columns("scene", "pose", "source")
+        self.query_one("#predictions", DataTable).add_columns("scene", *self.joints())
+        self.query_one("#steps", OptionList).highlighted = 0
+        self.set_interval(0.1, self._tick_recording, pause=False)
+
+    def show_event(self, event: object) -> None:
+        if isinstance(event, SpectrumFrame):
+            self.spectrum.show_frame(event)
+
+    # -- navigation -------------------------------------------------------------------------------
+
+    @on(OptionList.OptionHighlighted, "#steps")
+    def _step_chosen(self, event: OptionList.OptionHighlighted) -> None:
+        self.query_one(ContentSwitcher).current = STEPS[event.option_index][0]
+
+    def go(self, step: str) -> None:
+        self.query_one("#steps", OptionList).highlighted = [s for s, _ in STEPS].index(step)
+
+    def action_step(self, delta: int) -> None:
+        steps = self.query_one("#steps", OptionList)
+        steps.highlighted = min(max((steps.highlighted or 0) + delta, 0), len(STEPS) - 1)
+
+    def _need_scene(self) -> str:
+        if self.scene is None:
+            self.go("scene")
+            raise ServantError("teach: pick or name a scene first (step 1)")
+        return self.scene
+
+    # -- 1 scene ----------------------------------------------------------------------------------
+
+    @on(Input.Submitted, "#new-scene")
+    @on(Button.Pressed, "#use-scene")
+    def use_scene(self) -> None:
+        typed = self.query_one("#new-scene", Input).value.strip()
+        known = self.query_one("#known", Select).value
+        scene = typed or (known if isinstance(known, str) else None)
+        if not scene:
+            self.notify("Pick a known scene or type a new name.", severity="warning")
+            return
+        if "/" in scene or scene.startswith("."):
+            self.app.report_error(
+                ServantError(f"{scene!r}: a scene name cannot hold '/' or start with '.'")
+            )
+            return
+        self.scene = scene
+        self.sub_title = f"teaching {scene}"
+        self.app.log_line(None, f"teaching scene {scene}")
+        self.go("sound")
+
+    # -- 2 sound ----------------------------------------------------------------------------------
+
+    @on(Button.Pressed, "#record")
+    def start_recording(self) -> None:
+        scene = self._try(self._need_scene)
+        if scene is None:
+            return
+        self.query_one("#record", Button).disabled = True
+        self._recording_started = time.monotonic()
+        self.record(scene)
+
+    def _tick_recording(self) -> None:
+        if self._recording_started is not None:
+            elapsed = time.monotonic() - self._recording_started
+            self.query_one("#record-progress", ProgressBar).update(
+                progress=min(elapsed, DEFAULT_WINDOW_SECONDS)
+            )
+
+    @work(thread=True, exclusive=True, group="record", exit_on_error=False)
+    def record(self, scene: str) -> None:
+        try:
+            audio = np.asarray(
+                self.app.engine.record_window(DEFAULT_WINDOW_SECONDS), dtype=np.float32
+            )
+            rate = self.app.engine.audio_rate
+            path = write_wav(self.root / scene / f"{stamp()}.wav", audio, rate)
+        finally:
+            self.app.call_from_thread(self._recording_over)
+        self.post_message(RecordingDone(path, len(audio) / rate))
+
+    def _recording_over(self) -> None:
+        self._recording_started = None
+        self.query_one("#record", Button).disabled = False
+
+    @on(RecordingDone)
+    def recorded(self, message: RecordingDone) -> None:
+        self.windows += 1
+        self.query_one("#record-progress", ProgressBar).update(progress=DEFAULT_WINDOW_SECONDS)
+        self.query_one("#sound-status", Static).update(
+            f"{self.windows} window(s) recorded; last: {message.path.name} "
+            f"({message.seconds:.1f} s)"
+        )
+        self.app.log_line(None, f"recorded {message.path}")
+
+    # -- 3 pictures -------------------------------------------------------------------------------
+
+    @on(Button.Pressed, "#take-picture")
+    def start_picture(self) -> None:
+        scene = self._try(self._need_scene)
+        if scene is not None:
+            self.take_picture(scene)
+
+    @work(thread=True, exclusive=True, group="picture", exit_on_error=False)
+    def take_picture(self, scene: str) -> None:
+        frame = self.app.engine.take_picture()
+        ok, png = cv2.imencode(".png", frame)
+        if not ok:
+            raise ServantError("camera: the picture could not be encoded; try again")
+        path = atomic_write_bytes(self.root / scene / f"{stamp()}.png", png.tobytes())
+        colours, shares = dominant_colours(frame)
+        self.post_message(PictureTaken(path, colours, shares))
+
+    @on(PictureTaken)
+    def pictured(self, message: PictureTaken) -> None:
+        self.pictures += 1
+        text = Text(f"{self.pictures} picture(s) taken; last: {message.path.name}\n")
+        text.append_text(share_strip(np.asarray(message.colours), np.asarray(message.shares), 40))
+        self.query_one("#picture-status", Static).update(text)
+        self.app.log_line(None, f"took {message.path}")
+
+    # -- 4 pose -----------------------------------------------------------------------------------
+
+    @on(Button.Pressed, "#guided")
+    def use_arm_pose(self) -> None:
+        state = self.app.arm_state
+        if state is None or not state.connected:
+            self.app.report_error(
+                ServantError("arm: not connected, so its pose cannot be read; type the angles")
+            )
+            return
+        for joint, angle in state.angles.items():
+            for field in self.query(f"#joint-{joint}").results(Input):
+                field.value = f"{angle:g}"
+        self._source = "recorded"
+
+    def typed_pose(self) -> dict[str, float]:
+        pose = {}
+        settings = self.app.settings
+        for joint in self.joints():
+            text = self.query_one(f"#joint-{joint}", Input).value.strip()
+            try:
+                angle = float(text)
+            except ValueError:
+                raise ServantError(
+                    f"pose: {joint} needs an angle in degrees (got {text!r})"
+                ) from None
+            if settings is not None and joint in {j.name for j in settings.joints}:
+                limits = settings.joint(joint)
+                if not limits.min_angle <= angle <= limits.max_angle:
+                    raise ServantError(
+                        f"pose: {joint} {angle:g}° is outside its limits "
+                        f"{limits.min_angle:g}..{limits.max_angle:g}°; "
+                        "change the angle or the limits in Settings"
+                    )
+            pose[joint] = angle
+        return pose
+
+    @on(Button.Pressed, "#add-sample")
+    def add_sample(self) -> None:
+        from servant_core.actions.records import TeachRecord, append_record, label_scores
+
+        try:
+            scene = self._need_scene()
+            pose = self.typed_pose()
+            scenes = SceneLibrary.scan(self.root).scenes if self.root.is_dir() else [scene]
+            source = getattr(self, "_source", "typed")
+            record = TeachRecord(scene, label_scores(scene, scenes), pose, time.time(), source)
+            append_record(record)
+        except ServantError as error:
+            self.app.report_error(error)
+            return
+        self._source = "typed"
+        shown = ", ".join(f"{j} {a:g}°" for j, a in pose.items())
+        self.query_one("#samples", DataTable).add_row(scene, shown, record.source)
+        self.app.log_line(None, f"taught {scene}: {shown}")
+
+    @on(Button.Pressed, "#again")
+    def teach_another(self) -> None:
+        self.scene = None
+        self.windows = self.pictures = 0
+        self.query_one("#new-scene", Input).value = ""
+        self.go("scene")
+
+    # -- 5 train ----------------------------------------------------------------------------------
+
+    @on(Button.Pressed, "#train-learner")
+    def start_training(self) -> None:
+        self.errors = []
+        self.query_one("#train-learner", Button).disabled = True
+        self.train()
+
+    @work(thread=True, exclusive=True, group="train", exit_on_error=False)
+    def train(self) -> None:
+        from servant_core.actions.learner import ActionLearner
+        from servant_core.actions.records import load_records
+
+        try:
+            records = load_records()
+            learner = ActionLearner(report_every=100)  # enough points for a curve
+            total = learner.max_iter
+
+            def report(iterations: int, error: float) -> None:
+                self.post_message(TrainingProgress(iterations, total, error))
+
+            learner.fit(records, report=report)
+            learner.save()
+        finally:
+            self.app.call_from_thread(
+                setattr, self.query_one("#train-learner", Button), "disabled", False
+            )
+        self.post_message(TrainingDone(learner))
+
+    @on(TrainingProgress)
+    def training_progress(self, message: TrainingProgress) -> None:
+        self.errors.append(message.error)
+        self.query_one("#train-progress", ProgressBar).update(
+            total=message.total, progress=message.step
+        )
+        self.query_one("#error-curve", Sparkline).data = list(self.errors)
+        self.query_one("#train-status", Static).update(
+            f"iteration {message.step}/{message.total}: mean error {message.error:.2f}°"
+        )
+
+    @on(TrainingDone)
+    def trained(self, message: TrainingDone) -> None:
+        self.learner = message.learner
+        final = self.errors[-1] if self.errors else float("nan")
+        summary = f"trained on {message.learner.n_records_} teach records; error {final:.2f}°"
+        self.query_one("#train-status", Static).update(summary)
+        self.app.log_line(None, summary)
+        self.show_predictions()
+        self.go("test")
+
+    @on(Button.Pressed, "#retrain")
+    def start_retrain(self) -> None:
+        self.query_one("#train-status", Static).update("retraining the recognisers…")
+        self.retrain()
+
+    @work(thread=True, exclusive=True, group="retrain", exit_on_error=False)
+    def retrain(self) -> None:
+        library = SceneLibrary.scan(self.root)
+        self.app.engine.retrain(library)
+        self.post_message(RetrainDone(f"recognisers retrained on {len(library.scenes)} scenes"))
+
+    @on(RetrainDone)
+    def retrained(self, message: RetrainDone) -> None:
+        self.query_one("#train-status", Static).update(message.summary)
+        self.app.log_line(None, message.summary)
+
+    # -- 6 test -----------------------------------------------------------------------------------
+
+    def show_predictions(self) -> None:
+        from servant_core.actions.records import label_scores
+
+        table = self.query_one("#predictions", DataTable)
+        table.clear()
+        learner = self.learner
+        for scene in learner.taught_scenes_:
+            pose = learner.pose(label_scores(scene, learner.scenes_))
+            table.add_row(
+                scene, *(f"{pose.get(j, float('nan')):.1f}°" for j in self.joints()), key=scene
+            )
+
+    def _try(self, step: Any) -> Any:
+        try:
+            return step()
+        except ServantError as error:
+            self.app.report_error(error)
+            return None

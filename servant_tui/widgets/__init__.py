@@ -1,0 +1,1 @@
+"""The panes of the live and teach screens; each shows one kind of engine event."""

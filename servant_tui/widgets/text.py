@@ -1,0 +1,25 @@
+"""Small text pieces the panes share: engine times and horizontal bars."""
+
+from __future__ import annotations
+
+from rich.text import Text
+
+
+def clock(t: float) -> str:
+    """Engine time as minutes:seconds since the engine started."""
+    minutes, seconds = divmod(max(t, 0.0), 60.0)
+    return f"{int(minutes):02d}:{seconds:04.1f}"
+
+
+def bar(fraction: float, width: int, style: str = "green") -> Text:
+    """A bar `width` cells long filled to `fraction` (clipped to 0..1), in eighths of a cell."""
+    fraction = min(max(fraction, 0.0), 1.0)
+    eighths = round(fraction * width * 8)
+    full, rest = divmod(eighths, 8)
+    partial = " ▏▎▍▌▋▊▉"[rest] if full < width else ""
+    filled = "█" * full + partial.strip()
+    return Text.assemble((filled, style), ("·" * (width - len(filled)), "grey35"))
+
+
+def percent(confidence: float | None) -> str:
+    return "  –  " if confidence is None else f"{confidence:5.1f}"

@@ -1,0 +1,181 @@
+"""The link's faults and safety rules, on the emulator's pty and in dry runs."""
+
+from __future__ import annotations
+
+import pytest
+
+from servant_core.errors import ServantError
+from servant_core.servo import maestro
+from servant_core.servo.emulator import start_emulator
+from servant_core.servo.link import MAX_STEP_S, ManualClock, ServoLink
+from servant_core.settings import Joint, default_joints
+
+JOINTS = default_joints()
+
+
+@pytest.fixture
+def emulator():
+    emu, port = start_emulator("maestro")
+    yield emu, port
+    emu.stop()
+
+
+def dry_link(protocol="maestro"):
+    clock = ManualClock()
+    return ServoLink.open(
+        None, protocol, JOINTS, dry_run=True, clock=clock, sleep=clock.sleep
+    ), clock
+
+
+def test_unknown_protocol_is_one_clear_error():
+    with pytest.raises(
+        ServantError, match="protocol 'lx16a' is unknown; use one of maestro, ssc32, firmata"
+    ):
+        ServoLink.open("/dev/ttyUSB0", "lx16a", JOINTS)
+
+
+def test_missing_port(tmp_path):
+    with pytest.raises(ServantError, match="no such serial port"):
+        ServoLink.open(str(tmp_path / "ttyACM9"), "maestro", JOINTS)
+    with pytest.raises(ServantError, match="no serial port given"):
+        ServoLink.open(None, "maestro", JOINTS)
+
+
+def test_busy_port(emulator):
+    _, port = emulator
+    with ServoLink.open(port, "maestro", JOINTS):
+        with pytest.raises(ServantError, match="busy"):
+            ServoLink.open(port, "maestro", JOINTS)
+
+
+def test_controller_that_does_not_answer_times_out():
+    emu, port = start_emulator("ssc32", fault="silent")
+    try:
+        with pytest.raises(ServantError, match=r"no answer from a Lynxmotion SSC-32 within 0.2 s"):
+            ServoLink.open(port, "ssc32", JOINTS, timeout=0.2)
+    finally:
+        emu.stop()
+
+
+def test_garbage_from_the_controller_is_reported_and_survived(emulator):
+    emu, port = emulator
+    emu.fault = "garbage"
+    with pytest.raises(ServantError, match="not a Pololu Maestro reply"):
+        ServoLink.open(port, "maestro", JOINTS)
+    emu.fault = None
+    with ServoLink.open(port, "maestro", JOINTS) as link:
+        emu.fault = "garbage"
+        with pytest.raises(ServantError, match="not a Pololu Maestro reply"):
+            link.read_positions()
+        emu.fault = None
+        assert link.read_positions() == {}  # no channel sends a pulse yet; the link still works
+
+
+def test_wrong_protocol_on_the_line_is_garbage_or_silence():
+    emu, port = start_emulator("ssc32")
+    try:
+        with pytest.raises(ServantError, match="no answer|not a Arduino|not a"):
+            ServoLink.open(port, "firmata", JOINTS, timeout=0.2)
+    finally:
+        emu.stop()
+
+
+def test_nothing_moves_unless_armed():
+    link, _ = dry_link()
+    setup = list(link.sent)
+    with pytest.raises(ServantError, match="not armed"):
+        link.move_to({"shoulder": 10})
+    assert list(link.sent) == setup
+    link.arm()
+    link.disarm()
+    sent = len(link.sent)
+    assert link.step() == {}
+    assert len(link.sent) == sent
+
+
+def test_dry_run_shows_the_exact_bytes():
+    link, clock = dry_link()
+    # Setup: each joint's speed limit (shoulder 30 deg/s = 166.7 us/s -> 6 units of 25 us/s).
+    assert link.sent[0] == maestro.set_speed(3, 6) + maestro.set_speed(4, 10) + maestro.set_speed(
+        5, 13
+    )
+    link.arm()  # no pulse known: every joint goes home
+    assert link.sent[-1] == maestro.set_target(3, 1000) + maestro.set_target(
+        4, 1500
+    ) + maestro.set_target(5, 1000)
+    clock.sleep(0.1)
+    assert link.move_to({"shoulder": 90}, wait=False) == {"shoulder": 3.0}  # 30 deg/s for 0.1 s
+    assert link.sent[-1] == maestro.set_target(3, 1000 + 3 * 500 / 90)
+
+
+def test_angles_are_clamped_and_said_and_unknown_joints_refused():
+    link, clock = dry_link()
+    link.arm()
+    link.move_to({"elbow": 500, "gripper": -20}, wait=False)
+    assert link.goal == {"elbow": 135.0, "gripper": 0.0}
+    assert link.notes == [
+        "elbow: 500 is beyond 0..135 degrees, clamped to 135",
+        "gripper: -20 is beyond 0..90 degrees, clamped to 0",
+    ]
+    with pytest.raises(
+        ServantError, match="no joint named 'wrist'; the arm's joints are: shoulder, elbow, gripper"
+    ):
+        link.move_to({"wrist": 10})
+    with pytest.raises(ServantError, match="not an angle"):
+        link.move_to({"elbow": float("nan")})
+    assert link.goal == {"elbow": 135.0, "gripper": 0.0}
+
+
+def test_rate_limit_never_jumps_after_a_pause():
+    link, clock = dry_link()
+    link.arm()
+    clock.sleep(60)  # a long pause must not turn into one big step
+    first = link.move_to({"shoulder": 90}, wait=False)
+    assert first == {"shoulder": pytest.approx(30 * MAX_STEP_S)}
+    clock.sleep(0.05)
+    assert link.step() == {"shoulder": pytest.approx(30 * MAX_STEP_S + 1.5)}
+    assert link.settle()["shoulder"] == 90.0
+    assert link.status().angles["shoulder"] == 90.0
+
+
+def test_link_loss_disarms_and_reconnects_when_the_port_comes_back(tmp_path):
+    stable = tmp_path / "servo0"
+    emu, port = start_emulator("maestro", link=stable)
+    link = ServoLink.open(port, "maestro", JOINTS)
+    try:
+        link.arm()
+        assert link.status().armed and link.status().connected
+        emu.stop()
+        with pytest.raises(ServantError, match="was lost.*the arm is disarmed"):
+            link.move_to({"shoulder": 10})
+        state = link.status()
+        assert not state.armed and not state.connected
+        emu, _ = start_emulator("maestro", link=stable)
+        assert link.reconnect()
+        assert link.connected and not link.armed  # back, but only the user re-arms it
+        link.arm()
+        link.move_to({"shoulder": 1})
+    finally:
+        link.close()
+        emu.stop()
+
+
+def test_a_blocking_move_stops_when_disarmed():
+    link, clock = dry_link()
+    link.arm()
+
+    def sleep(seconds):
+        clock.sleep(seconds)
+        if clock() > 1.0:
+            link.disarm()  # as the user (or a lost port) would, from another thread
+
+    link.sleep = sleep
+    reached = link.move_to({"shoulder": 90})
+    assert 25 < reached["shoulder"] < 35  # about 1 s at 30 deg/s, then it stopped
+    assert not link.armed
+
+
+def test_joints_a_protocol_cannot_drive_are_refused_before_opening():
+    low = [Joint("wrist", 3, 0, 90, 500, 1500, 30, 0)]
+    with pytest.raises(ServantError, match="StandardFirmata reads pulses below 544"):
+        ServoLink.open(None, "firmata", low, dry_run=True)

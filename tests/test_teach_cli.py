@@ -1,0 +1,146 @@
+"""`servant teach` (the paper's Fig. 6 session), `servant servo ...` and `servant emulate-servo`."""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+import subprocess
+import sys
+
+import pytest
+
+from servant_core.actions.records import load_records
+from servant_core.cli import main
+from servant_core.servo.emulator import start_emulator
+from servant_core.settings import default_joints
+
+FIG6 = "coffee\n42\ngym\n10\n\ncoffee\ngym\n"
+
+
+def run(argv, stdin, monkeypatch, capsys):
+    monkeypatch.setattr(sys, "stdin", io.StringIO(stdin))
+    status = main(argv)
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def test_fig6_session_reproduces(monkeypatch, capsys):
+    status, out, _ = run(["teach"], FIG6, monkeypatch, capsys)
+    assert status == 0
+    lines = out.splitlines()
+    assert [
+        line for line in lines if line.startswith(("Scene label:", "What action", "Tell me"))
+    ] == [
+        "Scene label: coffee",
+        "What action should I take? 42",
+        "Scene label: gym",
+        "What action should I take? 10",
+        "Scene label: ",
+        "Tell me something: coffee",
+        "Tell me something: gym",
+        "Tell me something: ",
+    ]
+    errors = [
+        float(m.group(2)) for m in re.finditer(r"Error after (\d+) iterations?: ([\d.]+)", out)
+    ]
+    assert len(errors) == 4 and errors[-1] < errors[0] / 100
+    answers = lines[lines.index("Tell me something: coffee") + 1 :]
+    assert answers[0] == "42" and answers[2] == "10"
+    assert [(r.scene, r.pose) for r in load_records()] == [
+        ("coffee", {"shoulder": 42.0}),
+        ("gym", {"shoulder": 10.0}),
+    ]
+
+    # A later session asks the saved learner without training again.
+    status, out, _ = run(["teach", "--predict-only"], "gym\nlibrary\n", monkeypatch, capsys)
+    assert status == 0
+    assert "Tell me something: gym\n10\n" in out
+    assert "never taught what to do in 'library'" in out
+
+
+def test_bad_answers_are_asked_again_never_crash(monkeypatch, capsys):
+    session = (
+        "coffee\n\nlots\nwrist=10\n200\ngym\nshoulder=5, elbow=30\nstreet\n"  # ends mid-answer
+    )
+    status, out, _ = run(["teach", "--iterations", "50"], session, monkeypatch, capsys)
+    assert status == 0
+    assert "no action given" in out
+    assert "'lots' is not an angle" in out
+    assert "no joint named 'wrist'" in out
+    assert "shoulder: 200 is beyond 0..90 degrees, clamped to 90" in out
+    assert "No action for street; nothing recorded." in out
+    records = load_records()
+    assert [(r.scene, r.pose) for r in records] == [
+        ("coffee", {"shoulder": 90.0}),
+        ("gym", {"shoulder": 5.0, "elbow": 30.0}),
+    ]
+
+
+def test_nothing_taught_is_said(monkeypatch, capsys):
+    status, out, _ = run(["teach"], "\n", monkeypatch, capsys)
+    assert status == 1 and "Nothing to learn from" in out
+
+
+def test_teach_with_a_port_moves_the_emulated_arm(monkeypatch, capsys):
+    emulator, port = start_emulator("firmata")
+    try:
+        argv = ["teach", "--port", port, "--protocol", "firmata", "--iterations", "1000"]
+        status, out, _ = run(argv, "coffee\n20\n\ncoffee\n", monkeypatch, capsys)
+    finally:
+        emulator.stop()
+    assert status == 0, out
+    assert "The arm is armed on" in out
+    shoulder = default_joints()[0]
+    assert emulator.pulse(shoulder.channel) == pytest.approx(1000 + 20 * 500 / 90, abs=1)
+
+
+def test_servo_move_dry_run_prints_the_bytes(monkeypatch, capsys):
+    status, out, _ = run(
+        ["servo", "move", "--dry-run", "--protocol", "ssc32", "shoulder=3"], "", monkeypatch, capsys
+    )
+    assert status == 0
+    assert "bytes: '#3P1000S166#4P1500S250#5P1000S333\\r'" in out  # arming: home
+    assert "bytes: '#3P1017S166\\r'" in out  # 3 degrees, rate-limited: the last step
+    assert out.rstrip().endswith("moved to 3")
+
+
+def test_servo_query_and_errors(monkeypatch, capsys):
+    emulator, port = start_emulator("maestro")
+    try:
+        run(["servo", "home", "--port", port], "", monkeypatch, capsys)
+        status, out, _ = run(["servo", "query", "--port", port, "--json"], "", monkeypatch, capsys)
+    finally:
+        emulator.stop()
+    assert status == 0
+    assert json.loads(out)["angles"] == pytest.approx(
+        {"shoulder": 0.0, "elbow": 90.0, "gripper": 0.0}
+    )
+    status, _, err = run(
+        ["servo", "query", "--port", "/dev/nonexistent-servo"], "", monkeypatch, capsys
+    )
+    assert status == 2 and err.startswith(
+        "servant: error: /dev/nonexistent-servo: no such serial port"
+    )
+    status, _, err = run(["servo", "move", "--dry-run", "elbow=abc"], "", monkeypatch, capsys)
+    assert status == 2 and "'elbow=abc' is not an angle" in err
+
+
+def test_emulate_servo_prints_the_port_to_connect_to():
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "servant_tui",
+            "emulate-servo",
+            "--protocol",
+            "ssc32",
+            "--seconds",
+            "0.2",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert re.match(r"Emulating a Lynxmotion SSC-32 on /dev/pts/\d+; connect with", proc.stdout)

@@ -1,0 +1,19 @@
+"""The TUI over the real demo engine (synthesised scenes, paper recognisers, sequential fusion)."""
+
+from __future__ import annotations
+
+from servant_core.engine import ManualClock, build_demo_engine
+from servant_tui.app import ServantApp
+from tests.test_tui_live import log_text, settle
+
+
+async def test_demo_engine_reaches_a_decision_in_the_log(tmp_path):
+    # realtime=False: the synthesised walk plays as fast as the machine goes, on a simulated clock.
+    engine = build_demo_engine(seed=0, clock=ManualClock(), realtime=False, library_root=tmp_path)
+    app = ServantApp(engine, mode="demo")
+    async with app.run_test(size=(100, 30)) as pilot:
+        await settle(pilot, lambda: app.live.scene.decisions, tries=1500)
+        assert app.live.spectrum.frames_shown > 0
+        assert "detected" in log_text(app)
+        assert app.library_root == tmp_path
+    assert not engine.running, "quitting stops the engine's threads"

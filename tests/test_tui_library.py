@@ -1,0 +1,71 @@
+"""The library screen on a real library on disk: counts, relabel, delete, retrain, evaluate."""
+
+from __future__ import annotations
+
+import io
+
+from rich.console import Console
+from textual.widgets import DataTable, Input, Static
+
+from servant_tui.app import ServantApp
+from servant_tui.screens.dialogs import Confirm, ScenePrompt
+from servant_tui.screens.library import LibraryScreen, evaluation_table
+from tests.test_tui_live import settle
+from tests.tui_library import write_library
+from tests.tui_replay import ReplayEngine
+
+
+def rows(table: DataTable) -> list[list[str]]:
+    return [[str(c) for c in table.get_row_at(i)] for i in range(table.row_count)]
+
+
+async def test_library_lists_relabels_deletes_and_evaluates(tmp_path):
+    root = write_library(tmp_path / "library")
+    engine = ReplayEngine()
+    app = ServantApp(engine, library_root=root)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await pilot.press("l")
+        await settle(pilot, lambda: isinstance(app.screen, LibraryScreen))
+        screen = app.screen
+        scenes = screen.query_one("#scenes", DataTable)
+        assert rows(scenes) == [["cafe", "2", "2"], ["street", "2", "2"]]
+
+        samples = screen.query_one("#samples", DataTable)
+        samples.focus()
+        samples.move_cursor(row=2)  # cafe/pic0.png, after the two recordings
+        await pilot.press("r")
+        await settle(pilot, lambda: isinstance(app.screen, ScenePrompt))
+        app.screen.query_one(Input).value = ""
+        await pilot.press(*"street", "enter")
+        await settle(pilot, lambda: (root / "street" / "pic0-2.png").exists())
+        assert not (root / "cafe" / "pic0.png").exists(), "relabel moves, it does not copy"
+        assert rows(scenes) == [["cafe", "2", "1"], ["street", "2", "3"]]
+
+        samples.focus()
+        samples.move_cursor(row=0)
+        await pilot.press("d")
+        await settle(pilot, lambda: isinstance(app.screen, Confirm))
+        await pilot.click("#yes")
+        await settle(pilot, lambda: not (root / "cafe" / "rec0.wav").exists())
+        assert rows(scenes)[0] == ["cafe", "1", "1"]
+
+        await pilot.press("R")
+        await settle(pilot, lambda: engine.retrained)
+        assert engine.retrained[0].scenes == ["cafe", "street"]
+
+        await pilot.press("e")
+        await settle(pilot, lambda: screen.evaluation is not None, tries=1000)
+        assert screen.evaluation["protocol"] == "temporal"
+        assert set(screen.evaluation["per_class"]) == {"cafe", "street"}
+        text = Console(width=80, file=io.StringIO(), record=True)
+        text.print(evaluation_table(screen.evaluation))
+        shown = text.export_text()
+        assert "balanced accuracy" in shown and "recall street" in shown
+
+
+async def test_library_says_when_it_is_empty(tmp_path):
+    app = ServantApp(ReplayEngine(), library_root=tmp_path / "none")
+    async with app.run_test(size=(100, 30)) as pilot:
+        await pilot.press("l")
+        await settle(pilot, lambda: isinstance(app.screen, LibraryScreen))
+        assert "empty" in str(app.screen.query_one("#library-status", Static).render())

@@ -1,0 +1,103 @@
+"""The live screen over a replayed engine: panes, arm/disarm, the open-set prompt, errors, quit."""
+
+from __future__ import annotations
+
+from servant_core.errors import ServantError
+from servant_core.events import ErrorEvent
+from servant_tui.app import ServantApp
+from servant_tui.screens.dialogs import LabelPrompt
+from servant_tui.widgets.spectrum import Spectrum
+from tests.tui_replay import ReplayEngine, unknown_scene_script
+
+
+async def settle(pilot, predicate, tries: int = 100) -> None:
+    for _ in range(tries):
+        if predicate():
+            return
+        await pilot.pause(0.02)
+    raise AssertionError("the application never reached the expected state")
+
+
+def log_text(app) -> str:
+    return " ".join(line.text.strip() for line in app.live.log_view.lines)
+
+
+async def test_live_screen_shows_the_replayed_afternoon(tmp_path):
+    engine = ReplayEngine()
+    app = ServantApp(engine, mode="demo", library_root=tmp_path)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await settle(pilot, lambda: app.live.scene.decisions and app.live.spectrum.frames_shown)
+        assert "CoffeeScene detected" in log_text(app)
+        assert "No scene detected" in log_text(app)
+        assert [d.line for d in app.live.scene.decisions] == [
+            "CoffeeScene detected",
+            "No scene detected",
+        ]
+        assert app.live.colours.palette.matched_scene == "CoffeeScene"
+        assert app.query_one(Spectrum).frames_shown == 1
+    assert engine.stopped.is_set(), "quitting must stop the engine"
+
+
+async def test_arm_and_disarm_on_one_key(tmp_path):
+    engine = ReplayEngine()
+    app = ServantApp(engine, library_root=tmp_path)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await settle(pilot, lambda: app.arm_state is not None and engine.started.is_set())
+        assert not app.arm_state.armed
+        await pilot.press("a")
+        await settle(pilot, lambda: app.arm_state.armed)
+        assert engine.armed
+        assert app.live.arm.has_class("-armed")
+        assert "ARMED" in app.live.arm.border_title
+        await pilot.press("a")
+        await settle(pilot, lambda: not app.arm_state.armed)
+        assert not engine.armed and not app.live.arm.has_class("-armed")
+
+
+async def test_arm_key_is_disabled_without_a_link(tmp_path):
+    engine = ReplayEngine(script=[])
+    app = ServantApp(engine, library_root=tmp_path)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await settle(pilot, engine.started.is_set)
+        assert app.check_action("toggle_arm", ()) is False
+        await pilot.press("a")
+        await pilot.pause()
+        assert not engine.armed
+
+
+async def test_unknown_place_prompts_and_labels(tmp_path):
+    engine = ReplayEngine(unknown_scene_script())
+    app = ServantApp(engine, library_root=tmp_path)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await settle(pilot, lambda: isinstance(app.screen, LabelPrompt))
+        await pilot.press(*"Library", "enter")
+        await settle(pilot, lambda: engine.labels)
+        assert engine.labels == [("window-7", "Library")]
+        assert not isinstance(app.screen, LabelPrompt)
+
+
+async def test_errors_are_logged_and_notified_not_fatal(tmp_path):
+    engine = ReplayEngine(
+        script=[ErrorEvent(1.0, "camera: cannot open index 0; pick another in Settings")]
+    )
+    app = ServantApp(engine, library_root=tmp_path)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await settle(pilot, lambda: app.live.log_view.lines)
+        assert "camera: cannot open index 0" in log_text(app)
+        await pilot.press("a")  # no arm state: the key does nothing, and nothing crashes
+        await pilot.pause()
+        assert app.is_running
+        assert any("camera" in n.message for n in app._notifications)
+
+
+class FailingEngine(ReplayEngine):
+    def start(self) -> None:
+        raise ServantError("microphone: no input device; plug one in or pick it in Settings")
+
+
+async def test_an_engine_that_cannot_start_is_reported(tmp_path):
+    app = ServantApp(FailingEngine(), library_root=tmp_path)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await settle(pilot, lambda: app.live.log_view.lines)
+        assert "microphone: no input device" in log_text(app)
+        assert app.is_running

@@ -1,0 +1,108 @@
+"""The whole teach flow through the UI: create a scene, record from a replayed source, take a
+picture, enter a pose, teach a second scene, train (the error falls), test the learnt poses."""
+
+from __future__ import annotations
+
+import pytest
+from textual.widgets import DataTable, Input, Sparkline
+
+from servant_tui.app import ServantApp
+from servant_tui.screens.teach import TeachScreen
+from tests.test_tui_live import settle
+from tests.tui_library import RATE, noise_recording
+from tests.tui_replay import ReplayEngine
+
+records = pytest.importorskip(
+    "servant_core.actions.records", reason="teach records come with the servo work"
+)
+
+
+async def type_into(pilot, selector: str, text: str) -> None:
+    pilot.app.screen.query_one(selector, Input).value = ""
+    await pilot.click(selector)
+    await pilot.press(*text)
+
+
+async def teach_pose(pilot, screen, pose: dict[str, str]) -> None:
+    screen.go("pose")
+    await pilot.pause()
+    for joint, angle in pose.items():
+        await type_into(pilot, f"#joint-{joint}", angle)
+    await pilot.click("#add-sample")
+
+
+async def test_teach_flow_from_scene_to_tested_pose(tmp_path, monkeypatch):
+    monkeypatch.setenv("SERVANT_DATA_DIR", str(tmp_path / "data"))
+    monkeypatch.setenv("SERVANT_CONFIG_DIR", str(tmp_path / "config"))
+    root = tmp_path / "library"
+    engine = ReplayEngine(window_source=noise_recording(12.0, 500.0, seed=3), audio_rate=RATE)
+    app = ServantApp(engine, library_root=root)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await settle(pilot, lambda: engine.started.is_set() and app.arm_state is not None)
+        await pilot.press("t")
+        await settle(pilot, lambda: isinstance(app.screen, TeachScreen))
+        screen = app.screen
+
+        await type_into(pilot, "#new-scene", "CoffeeScene")
+        await pilot.press("enter")
+        assert screen.scene == "CoffeeScene"
+        await pilot.click("#record")
+        await settle(pilot, lambda: screen.windows == 1, tries=400)
+        assert len(list((root / "CoffeeScene").glob("*.wav"))) == 1
+        assert screen.spectrum.frames_shown >= 1, "the live spectrum shows while recording"
+
+        await pilot.press("ctrl+n")
+        await pilot.click("#take-picture")
+        await settle(pilot, lambda: screen.pictures == 1)
+        assert len(list((root / "CoffeeScene").glob("*.png"))) == 1
+
+        await teach_pose(pilot, screen, {"shoulder": "30", "elbow": "100", "wrist": "90"})
+        await settle(pilot, lambda: screen.query_one("#samples", DataTable).row_count == 1)
+
+        await pilot.click("#again")
+        await type_into(pilot, "#new-scene", "GymScene")
+        await pilot.press("enter")
+        await teach_pose(pilot, screen, {"shoulder": "150", "elbow": "20", "wrist": "10"})
+        await settle(pilot, lambda: screen.query_one("#samples", DataTable).row_count == 2)
+        saved = records.load_records()
+        assert [(r.scene, r.pose["shoulder"]) for r in saved] == [
+            ("CoffeeScene", 30.0),
+            ("GymScene", 150.0),
+        ]
+
+        screen.go("train")
+        await pilot.pause()
+        await pilot.click("#train-learner")
+        await settle(pilot, lambda: screen.learner is not None, tries=1000)
+        assert len(screen.errors) > 3
+        assert screen.errors[-1] < screen.errors[0], "the training error must fall"
+        assert list(screen.query_one("#error-curve", Sparkline).data) == screen.errors
+
+        predictions = screen.query_one("#predictions", DataTable)
+        assert predictions.row_count == 2
+        coffee = [str(c) for c in predictions.get_row("CoffeeScene")]
+        assert abs(float(coffee[1].rstrip("°")) - 30.0) < 5.0
+
+        screen.go("train")
+        await pilot.pause()
+        await pilot.click("#retrain")
+        await settle(pilot, lambda: engine.retrained)
+        assert engine.retrained[0].scenes == ["CoffeeScene"], (
+            "GymScene was taught a pose, no sample"
+        )
+
+
+async def test_a_pose_without_angles_is_refused_in_one_line(tmp_path, monkeypatch):
+    monkeypatch.setenv("SERVANT_DATA_DIR", str(tmp_path / "data"))
+    engine = ReplayEngine()
+    app = ServantApp(engine, library_root=tmp_path / "library")
+    async with app.run_test(size=(120, 40)) as pilot:
+        await settle(pilot, lambda: app.arm_state is not None)
+        await pilot.press("t")
+        await settle(pilot, lambda: isinstance(app.screen, TeachScreen))
+        await type_into(pilot, "#new-scene", "CoffeeScene")
+        await pilot.press("enter")
+        await teach_pose(pilot, app.screen, {"shoulder": "30"})
+        await settle(pilot, lambda: app._notifications)
+        assert any("elbow needs an angle" in n.message for n in app._notifications)
+        assert records.load_records() == []

@@ -1,0 +1,168 @@
+"""A finite, deterministic replay of engine events, for the TUI's snapshot and Pilot tests.
+
+Why a replay and not the real engine here: a snapshot must show the same pixels every run, so the
+events come from a fixed script with fixed times (no wall clock, no threads racing). It speaks the
+same API as `servant_core.engine.Engine` and emits the real event types of `servant_core.events`.
+The tests over the real demo engine live beside these (`test_tui_demo_engine.py`).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from servant_core.errors import ServantError
+from servant_core.events import (
+    AcousticPrediction,
+    ArmState,
+    Decision,
+    DeviceStatus,
+    FusionState,
+    Palette,
+    SpectrumFrame,
+    UnknownScene,
+    VisualPrediction,
+)
+
+RATE = 44100
+JOINTS = {"shoulder": 90.0, "elbow": 45.0, "wrist": 120.0}
+
+
+def spectrum_frame(t: float, seed: int = 0) -> SpectrumFrame:
+    """A pink-ish noise spectrum with two hums, the same for the same seed."""
+    rng = np.random.default_rng(seed)
+    freqs = np.fft.rfftfreq(4096, 1 / RATE)[1:]
+    level = -30.0 - 10.0 * np.log10(freqs / 100.0 + 1.0) * 2.0 + rng.normal(0, 3, len(freqs))
+    for hum in (120.0, 2400.0):
+        level += 25.0 * np.exp(-(((freqs - hum) / (hum * 0.04)) ** 2))
+    return SpectrumFrame(t=t, freqs=freqs, magnitude_db=np.clip(level, -100, 0))
+
+
+COFFEE = np.array([[92, 58, 38], [201, 170, 130], [30, 28, 26], [240, 236, 226]], dtype=np.uint8)
+COFFEE_TRAINED = np.array(
+    [[98, 60, 40], [196, 166, 128], [34, 30, 28], [236, 232, 222]], dtype=np.uint8
+)
+
+
+def demo_script() -> list[Any]:
+    """A short afternoon: no scene at first, then a coffee shop confirmed by two pictures."""
+    return [
+        DeviceStatus(0.0, "microphone", True, "demo synth 44.1 kHz"),
+        DeviceStatus(0.0, "camera", True, "demo frames"),
+        DeviceStatus(0.0, "servo", True, "emulator on /dev/pts/3"),
+        ArmState(0.0, True, False, "maestro", "/dev/pts/3", dict(JOINTS)),
+        AcousticPrediction(5.0, "GymScene", 61.4, {"GymScene": 0.6, "CoffeeScene": 0.4}),
+        FusionState(5.0, "looking", "GymScene", 30.0, 0),
+        FusionState(35.0, "listening", None, None, 0),
+        Decision(35.0, None, 0.0, "No scene detected"),
+        AcousticPrediction(40.0, "CoffeeScene", 91.2, {"CoffeeScene": 0.9, "GymScene": 0.1}),
+        FusionState(40.0, "looking", "CoffeeScene", 30.0, 0),
+        Palette(44.0, COFFEE, np.array([0.41, 0.27, 0.2, 0.12]), "CoffeeScene", COFFEE_TRAINED),
+        VisualPrediction(44.0, "CoffeeScene", 83.8, {"CoffeeScene": 0.8}),
+        FusionState(44.0, "confirming", "CoffeeScene", 26.0, 1),
+        FusionState(48.0, "confirming", "CoffeeScene", 22.0, 2),
+        Decision(48.0, "CoffeeScene", 87.5, "CoffeeScene detected", 91.2, 83.8),
+        ArmState(
+            48.0,
+            True,
+            False,
+            "maestro",
+            "/dev/pts/3",
+            dict(JOINTS),
+            {"shoulder": 30.0, "elbow": 100.0, "wrist": 90.0},
+        ),
+        AcousticPrediction(53.0, "CoffeeScene", 88.0, {"CoffeeScene": 0.85}),
+        FusionState(53.0, "looking", "CoffeeScene", 30.0, 0),
+        FusionState(60.5, "looking", "CoffeeScene", 22.5, 1),
+        spectrum_frame(60.5),
+    ]
+
+
+class ReplayEngine:
+    """Emits `script` on `start()`, in order, from the calling thread; records what it is asked."""
+
+    def __init__(
+        self,
+        script: list[Any] | None = None,
+        *,
+        window_source: np.ndarray | None = None,
+        audio_rate: int = RATE,
+    ) -> None:
+        self.audio_rate = audio_rate
+        self.script = demo_script() if script is None else script
+        self.callbacks: list[Callable[[Any], None]] = []
+        self.started = threading.Event()
+        self.stopped = threading.Event()
+        self.armed = False
+        self.labels: list[tuple[str, str]] = []
+        self.retrained: list[Any] = []
+        self.window_source = window_source
+        self.windows_recorded = 0
+        self.pictures_taken = 0
+        self.t = 0.0
+        self._arm: ArmState | None = None
+
+    def subscribe(self, callback: Callable[[Any], None]) -> None:
+        self.callbacks.append(callback)
+
+    def emit(self, event: Any) -> None:
+        if isinstance(event, ArmState):
+            self._arm = event
+        self.t = max(self.t, event.t)
+        for callback in self.callbacks:
+            callback(event)
+
+    def start(self) -> None:
+        for event in self.script:
+            self.emit(event)
+        self.started.set()
+
+    def stop(self) -> None:
+        self.stopped.set()
+
+    def _set_armed(self, armed: bool) -> None:
+        if self._arm is None or not self._arm.connected:
+            raise ServantError("servo: not connected; check the serial port in Settings")
+        self.armed = armed
+        state = self._arm
+        self.emit(
+            ArmState(
+                self.t, True, armed, state.protocol, state.port, dict(state.angles), state.target
+            )
+        )
+
+    def arm(self) -> None:
+        self._set_armed(True)
+
+    def disarm(self) -> None:
+        self._set_armed(False)
+
+    def label_unknown(self, window_id: str, scene: str) -> None:
+        self.labels.append((window_id, scene))
+
+    def record_window(self, seconds: float) -> np.ndarray:
+        """The next `seconds` of the replayed source (a recording the test hands in)."""
+        if self.window_source is None:
+            raise ServantError("microphone: no audio source in this replay")
+        n = int(seconds * self.audio_rate)
+        start = (self.windows_recorded * n) % max(len(self.window_source) - n, 1)
+        self.windows_recorded += 1
+        self.emit(spectrum_frame(self.t, seed=self.windows_recorded))
+        return self.window_source[start : start + n]
+
+    def take_picture(self) -> np.ndarray:
+        """A picture in the coffee shop's colours, the same every time for the same count."""
+        rng = np.random.default_rng(self.pictures_taken)
+        self.pictures_taken += 1
+        picture = COFFEE[rng.integers(0, len(COFFEE), size=(48, 64))][..., ::-1]
+        return np.ascontiguousarray(picture)
+
+    def retrain(self, library: Any) -> None:
+        self.retrained.append(library)
+
+
+def unknown_scene_script() -> list[Any]:
+    return demo_script() + [UnknownScene(61.0, "audio", "GymScene", "window-7")]
