@@ -18,6 +18,7 @@ from servant_core.engine import Engine, build_demo_engine, spectrum_db
 from servant_core.errors import ServantError
 from servant_core.events import (
     AcousticPrediction,
+    ArmState,
     Decision,
     ErrorEvent,
     SpectrumFrame,
@@ -28,6 +29,10 @@ from servant_core.fusion import FusionConfig, SequentialFusion
 from servant_core.library import SceneLibrary
 from servant_core.recognisers import UNKNOWN
 from servant_core.recognisers.paper import PaperVisualRecogniser
+from servant_core.servo.emulator import start_emulator
+from servant_core.servo.link import ManualClock as LinkClock
+from servant_core.servo.link import ServoLink
+from servant_core.settings import default_joints
 from tests.conftest import tone
 
 
@@ -195,47 +200,36 @@ def test_an_unknown_picture_is_asked_about_and_labelled_into_the_library(tmp_pat
         engine.label_unknown(asked[-1].window_id, "../escape")
 
 
-class RecordingLink:
-    """The servo link lands from another branch; this records what the engine asks of one
-    (`.armed`, `.arm()`, `.disarm()`, `.move_to(pose)`, `.status()`)."""
-
-    def __init__(self):
-        self.armed = False
-        self.moves: list[dict] = []
-
-    def arm(self):
-        self.armed = True
-
-    def disarm(self):
-        self.armed = False
-
-    def move_to(self, pose):
-        self.moves.append(dict(pose))
-
-    def status(self):
-        return None
-
-
 def test_a_detected_scene_moves_the_arm_to_its_pose_only_when_armed(recognisers):
-    poses = {"coffee": {"shoulder": 30.0}, "gym": {"shoulder": 90.0}}
-    link = RecordingLink()
-
-    def run(armed: bool) -> list:
-        engine = build_demo_engine(seed=0, realtime=False)
-        engine.set_arm(link)
-        engine.set_action_learner(poses.get)
-        if armed:
-            engine.arm()
-        else:
-            engine.disarm()
-        engine.run_until(45.0)
-        engine.stop()
-        return engine
-
-    run(armed=False)
-    assert link.moves == []
-    run(armed=True)
-    assert link.moves and link.moves[0] == {"shoulder": 30.0} and {"shoulder": 90.0} in link.moves
+    """The real servo link, talking Maestro to the project's controller emulator on a pty."""
+    poses = {"coffee": {"shoulder": 30.0, "elbow": 90.0, "gripper": 0.0}}
+    emulator, port = start_emulator("maestro")
+    clock = LinkClock()
+    link = ServoLink.open(port, "maestro", default_joints(), clock=clock, sleep=clock.sleep)
+    try:
+        for armed in (False, True):
+            engine = build_demo_engine(seed=0, realtime=False)
+            events = collect(engine)
+            engine.set_arm(link)
+            engine.set_action_learner(poses.get)
+            if armed:
+                engine.arm()
+            else:
+                engine.disarm()
+            engine.run_until(12.0)  # the first CoffeeScene detected comes at ~9 s
+            engine.stop()
+            assert any(isinstance(e, Decision) and e.scene == "coffee" for e in events)
+            if not armed:
+                assert link.goal == {}  # detected, but a disarmed arm is never sent a pose
+        assert link.goal == poses["coffee"]
+        # Sent in rate-limited steps (on the link's manual clock) all the way to the pose; the
+        # emulated servos follow at their own speed.
+        assert link.commanded == pytest.approx(poses["coffee"])
+        assert emulator.pulse(3) > 1000.0  # the shoulder (channel 3) left 0° = 1000 µs
+        assert any(isinstance(e, ArmState) and e.armed for e in events)
+    finally:
+        link.close()
+        emulator.stop()
     with pytest.raises(ServantError, match="no arm attached"):
         Engine().arm()
 
