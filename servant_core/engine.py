@@ -435,25 +435,24 @@ class Engine:
         return frame
 
     def _on_picture(self, frame: np.ndarray, t: float) -> None:
-        colours, shares = dominant_colours(frame)
         with self._lock:
             visual = self.visual
         if visual is None:
-            self._emit(Palette(t, colours, shares))
+            self._emit(Palette(t, *dominant_colours(frame)))
             return
         X = visual.featurize([frame])
         scene, confidence, scores = _predict(visual, X)
         known = scene != UNKNOWN
-        matched = visual.matched_palette(X)[0] if hasattr(visual, "matched_palette") else None
-        self._emit(Palette(t, colours, shares, scene if known else None, matched))
         with self._lock:
             self._scores["visual"] = scores
+            events = self.fusion.on_visual(scene if known else None, confidence, t)
         self._emit(VisualPrediction(t, scene if known else None, confidence, scores))
+        # The decision (and the arm's move) first; the palette is only for show.
+        self._handle(events)
+        matched = visual.matched_palette(X)[0] if hasattr(visual, "matched_palette") else None
+        self._emit(Palette(t, *dominant_colours(frame), scene if known else None, matched))
         if not known:
             self._ask_label("image", _Kept("image", frame), scores, t)
-        with self._lock:
-            events = self.fusion.on_visual(scene if known else None, confidence, t)
-        self._handle(events)
 
     def _handle(self, events: list[Any]) -> None:
         for event in events:
@@ -541,11 +540,11 @@ class Engine:
         Returns mono float32 at `audio_rate`. Raises ServantError without a working audio source
         or if the audio does not arrive within `timeout` (default: twice `seconds` plus 2 s).
         """
+        if not self.running:
+            raise ServantError("engine: not running; start it before recording")
         ring = self._ring
         if ring is None or not self._audio_ok or self.audio is None:
             raise ServantError("microphone: no sound to record; check the microphone (see status)")
-        if not self.running:
-            raise ServantError("engine: not running; start it before recording")
         count = int(round(seconds * self.audio.rate))
         if count > ring.capacity:
             raise ServantError(f"engine: cannot record more than {RING_SECONDS:g} s at once")

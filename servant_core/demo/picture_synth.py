@@ -102,7 +102,8 @@ def street(rng: np.random.Generator, size: tuple[int, int] = PICTURE_SIZE) -> np
     for lx in range(int(rng.uniform(0, 30)), w, 50):
         cv2.rectangle(img, (lx, int(h * 0.8)), (lx + 26, int(h * 0.82)), (240, 240, 240), -1)
     cx = int(w * rng.uniform(0.1, 0.7))
-    car = _bgr(rng, tuple(int(c) for c in rng.integers(30, 220, 3)), 0)
+    red, green, blue = (int(c) for c in rng.integers(30, 220, 3))
+    car = _bgr(rng, (red, green, blue), 0)
     cv2.rectangle(img, (cx, int(h * 0.62)), (cx + 70, int(h * 0.72)), car, -1)
     cv2.circle(img, (cx + 14, int(h * 0.73)), 7, (20, 20, 20), -1)
     cv2.circle(img, (cx + 56, int(h * 0.73)), 7, (20, 20, 20), -1)

@@ -49,6 +49,10 @@ WALK = (
     Segment("street", "street", 20.0, "walking down the street"),
 )
 CAMERA_LAG_S = DEFAULT_WINDOW_SECONDS
+# Each place's typical loudness (RMS, dB re full scale). The paper's raw-FFT K-Means compares
+# amplitudes: a level wandering by 10 dB from window to window splits one place into two clusters,
+# and a much louder place spreads wider (noise spectra fluctuate in proportion to their level).
+SCENE_LEVEL_DB = {"coffee": -32.0, "gym": -30.0, "street": -29.0}
 
 
 def walk_length(walk: tuple[Segment, ...] = WALK) -> float:
@@ -66,9 +70,16 @@ def segment_at(t: float, walk: tuple[Segment, ...] = WALK) -> Segment:
 
 
 def synth_window(
-    scene: str, rng: np.random.Generator, seconds: float = DEFAULT_WINDOW_SECONDS
+    scene: str,
+    rng: np.random.Generator,
+    seconds: float = DEFAULT_WINDOW_SECONDS,
+    rate: int = DEMO_RATE,
 ) -> np.ndarray:
-    return SCENE_SOUNDS[scene](rng, seconds, DEMO_RATE)
+    """A window of the scene's sound at its typical loudness (within ±1.5 dB)."""
+    x = SCENE_SOUNDS[scene](rng, seconds, rate)
+    level_db = SCENE_LEVEL_DB[scene] + rng.uniform(-1.5, 1.5)
+    rms = float(np.sqrt(np.mean(x.astype(np.float64) ** 2))) or 1.0
+    return (x * (10 ** (level_db / 20) / rms)).astype(np.float32)
 
 
 def synth_picture(scene: str, rng: np.random.Generator) -> np.ndarray:

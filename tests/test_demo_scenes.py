@@ -1,0 +1,158 @@
+"""The demo's synthesised scenes: deterministic, recognised by the paper's recognisers on fresh
+windows and pictures, and a walk in which detections, mismatches and "No scene detected" happen."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from servant_core.demo.audio_synth import DEMO_RATE
+from servant_core.demo.scenes import (
+    SCENES,
+    WALK,
+    segment_at,
+    synth_picture,
+    synth_window,
+    train_demo_recognisers,
+    training_set,
+)
+from servant_core.engine import build_demo_engine
+from servant_core.events import AcousticPrediction, Decision, VisualPrediction
+from tests.conftest import REPO
+
+
+@pytest.fixture(scope="module")
+def recognisers():
+    return train_demo_recognisers(seed=0)
+
+
+def test_same_seed_same_scene_and_another_seed_another():
+    a = synth_window("coffee", np.random.default_rng([4, 2]))
+    b = synth_window("coffee", np.random.default_rng([4, 2]))
+    c = synth_window("coffee", np.random.default_rng([5, 2]))
+    assert a.dtype == np.float32 and a.shape == (5 * DEMO_RATE,)
+    assert np.array_equal(a, b) and not np.allclose(a, c)
+    p = synth_picture("gym", np.random.default_rng(1))
+    assert np.array_equal(p, synth_picture("gym", np.random.default_rng(1)))
+    assert p.dtype == np.uint8 and p.ndim == 3
+
+
+def test_scenes_sound_like_their_sources():
+    """Where each scene's energy lies: the espresso hiss and clinks put the café above 2 kHz more
+    than the street's rumble; the gym's bounces and the street's traffic sit low."""
+
+    def band_share(x: np.ndarray, low: float, high: float) -> float:
+        power = np.abs(np.fft.rfft(x)) ** 2
+        freqs = np.fft.rfftfreq(len(x), 1 / DEMO_RATE)
+        return float(power[(freqs >= low) & (freqs < high)].sum() / power.sum())
+
+    shares = {
+        s: np.mean(
+            [
+                band_share(synth_window(s, np.random.default_rng([9, i])), 2000, 8000)
+                for i in range(4)
+            ]
+        )
+        for s in SCENES
+    }
+    assert shares["coffee"] > shares["street"]
+    lows = {
+        s: np.mean(
+            [band_share(synth_window(s, np.random.default_rng([9, i])), 20, 250) for i in range(4)]
+        )
+        for s in SCENES
+    }
+    assert lows["street"] > lows["coffee"] and lows["gym"] > lows["coffee"]
+
+
+def test_paper_recognisers_recognise_fresh_windows_and_pictures(recognisers):
+    acoustic, visual = recognisers
+    windows, window_scenes, pictures, picture_scenes = training_set(
+        seed=123, windows_per_scene=8, pictures_per_scene=20
+    )
+    heard = acoustic.predict(acoustic.featurize(windows))
+    seen = visual.predict(visual.featurize(pictures))
+    acoustic_accuracy = float(np.mean(heard == np.array(window_scenes)))
+    visual_accuracy = float(np.mean(seen == np.array(picture_scenes)))
+    print(f"seed 123: acoustic accuracy {acoustic_accuracy:.3f}, visual {visual_accuracy:.3f}")
+    assert acoustic_accuracy >= 0.9
+    assert visual_accuracy >= 0.85
+    for scene in SCENES:  # every scene is recognised, not one favourite
+        assert np.mean(heard[np.array(window_scenes) == scene] == scene) >= 0.75
+
+
+def test_walk_is_deterministic_and_shows_detections_mismatch_and_no_scene():
+    def run() -> list[tuple]:
+        engine = build_demo_engine(seed=0, realtime=False)
+        events: list = []
+        engine.subscribe(events.append)
+        engine.run_until(100.0)
+        engine.stop()
+        return [
+            (type(e).__name__, round(e.t, 6), e.scene, round(e.confidence, 6))
+            for e in events
+            if isinstance(e, (Decision, AcousticPrediction, VisualPrediction))
+        ]
+
+    first = run()
+    assert first == run()
+    decisions = [(t, scene) for name, t, scene, _ in first if name == "Decision"]
+    detected = {scene for _, scene in decisions if scene}
+    assert detected == set(SCENES)
+    assert any(scene is None for _, scene in decisions), (
+        "the mismatch must end in No scene detected"
+    )
+    # The mismatch segment (street heard, café seen) never confirms a scene.
+    start = WALK[0].seconds + WALK[1].seconds + 5.0
+    end = start + WALK[2].seconds - 5.0
+    assert all(scene is None for t, scene in decisions if start + 5 < t < end)
+    assert segment_at(start).sound == "street" and segment_at(start).sight == "coffee"
+
+
+def test_servant_demo_headless_prints_the_papers_lines():
+    result = subprocess.run(
+        [sys.executable, "-m", "servant_tui", "demo", "--headless", "--fast", "--duration", "30"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=120,
+    )
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert any(line.endswith("microphone ok: demo sound: listening at 16000 Hz") for line in lines)
+    detected = [line for line in lines if "CoffeeScene detected  confidence" in line]
+    assert detected and detected[0].startswith("[   9.")  # 5 s window + 3 pictures 2 s apart
+    assert any("heard gym" in line for line in lines)
+
+
+def test_servant_run_headless_on_a_video_camera_without_microphone(tmp_path):
+    import cv2
+
+    path = tmp_path / "camera.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (32, 24))
+    for _ in range(5):
+        writer.write(np.zeros((24, 32, 3), np.uint8))
+    writer.release()
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "servant_tui",
+            "run",
+            "--headless",
+            "--no-mic",
+            "--camera",
+            str(path),
+            "--duration",
+            "0.3",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=60,
+    )
+    assert result.returncode == 0, result.stderr
+    assert f"camera ok: video {path}: ready" in result.stdout

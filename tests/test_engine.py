@@ -1,0 +1,269 @@
+"""The engine end to end over replayed audio and pictures: windows, spectra, decisions, threads,
+teach-mode recording, retraining from a library, unknown places, and the arm."""
+
+from __future__ import annotations
+
+import threading
+
+import cv2
+import numpy as np
+import pytest
+
+from servant_core.audio import read_audio, write_wav
+from servant_core.capture.replay import Clip, PacedAudio, PictureReplay, replay_recordings
+from servant_core.capture.source import ManualClock
+from servant_core.demo.audio_synth import DEMO_RATE
+from servant_core.demo.scenes import SCENES, synth_picture, synth_window, train_demo_recognisers
+from servant_core.engine import Engine, build_demo_engine, spectrum_db
+from servant_core.errors import ServantError
+from servant_core.events import (
+    AcousticPrediction,
+    ArmState,
+    Decision,
+    ErrorEvent,
+    SpectrumFrame,
+    UnknownScene,
+    VisualPrediction,
+)
+from servant_core.fusion import FusionConfig, SequentialFusion
+from servant_core.library import SceneLibrary
+from servant_core.recognisers import UNKNOWN
+from servant_core.recognisers.paper import PaperVisualRecogniser
+from servant_core.servo.emulator import start_emulator
+from servant_core.servo.link import ManualClock as LinkClock
+from servant_core.servo.link import ServoLink
+from servant_core.settings import default_joints
+from tests.conftest import tone
+
+
+@pytest.fixture(scope="module")
+def recognisers():
+    return train_demo_recognisers(seed=0)
+
+
+@pytest.fixture(scope="module")
+def library(tmp_path_factory):
+    """A small scene library on disk, synthesised: two recordings of 15 s and 4 pictures a scene."""
+    root = tmp_path_factory.mktemp("library")
+    for s, scene in enumerate(SCENES):
+        for r in range(2):
+            audio = np.concatenate(
+                [synth_window(scene, np.random.default_rng([77, s, r, k])) for k in range(3)]
+            )
+            write_wav(root / scene / f"rec{r}.wav", audio, DEMO_RATE)
+        for p in range(4):
+            picture = synth_picture(scene, np.random.default_rng([78, s, p]))
+            cv2.imwrite(str(root / scene / f"pic{p}.png"), picture)
+    return SceneLibrary.scan(root)
+
+
+def collect(engine: Engine) -> list:
+    events: list = []
+    engine.subscribe(events.append)
+    return events
+
+
+def test_spectrum_of_a_full_scale_sine_reads_0_db_at_its_frequency():
+    rate = 16000
+    freqs, db = spectrum_db(tone(1000.0, 2048 / rate, rate, amplitude=1.0), rate)
+    assert abs(freqs[np.argmax(db)] - 1000.0) < rate / 2048
+    assert db.max() == pytest.approx(0.0, abs=1.5)  # Hann scalloping loss is at most 1.4 dB
+
+
+def test_replaying_a_library_detects_each_scene(library, recognisers):
+    clock = ManualClock()
+    audio = replay_recordings(library.recordings, DEMO_RATE, realtime=False, clock=clock)
+    camera = PictureReplay(library.pictures, scene_of=lambda: audio.current_label)
+    acoustic, visual = recognisers
+    # Each scene plays 30 s: the paper's 30 s window would still be open, waiting on the old scene,
+    # when the next begins; 10 s lets every scene confirm.
+    fusion = SequentialFusion(FusionConfig(acoustic_window_s=10.0))
+    engine = Engine(
+        audio=audio, camera=camera, acoustic=acoustic, visual=visual, clock=clock, fusion=fusion
+    )
+    events = collect(engine)
+    engine.run_until(1e9)  # until the replay has been played out
+    engine.stop()
+
+    windows = [e for e in events if isinstance(e, AcousticPrediction)]
+    assert len(windows) == 3 * 2 * 3  # 5 s windows of 15 s recordings, none lost, none extra
+    assert [round(e.t, 6) for e in windows] == [5.0 * (k + 1) for k in range(18)]
+    truth = [r.scene for r in library.recordings for _ in range(3)]
+    assert np.mean([e.scene == s for e, s in zip(windows, truth, strict=True)]) >= 0.9
+    assert all(abs(sum(e.scores.values()) - 1) < 1e-6 for e in windows)
+    detected = {e.scene for e in events if isinstance(e, Decision) and e.scene}
+    assert detected == set(SCENES)
+    spectra = [e for e in events if isinstance(e, SpectrumFrame)]
+    assert len(spectra) == pytest.approx(30 * 90, rel=0.02)  # ~30 per second of audio
+    assert engine.latest_scores()["visual"].keys() == set(SCENES)
+
+
+def test_retrain_fits_new_models_from_a_library_and_swaps_them_in(library, recognisers):
+    acoustic, visual = recognisers
+    engine = Engine(acoustic=acoustic, visual=visual)
+    engine.retrain_needed = True
+    engine.retrain(library.root)
+    assert engine.acoustic is not acoustic and engine.visual is not visual
+    assert acoustic.scenes_ == engine.acoustic.scenes_  # the originals are untouched
+    assert not engine.retrain_needed
+    fresh = np.stack([synth_window(s, np.random.default_rng([5, i])) for i, s in enumerate(SCENES)])
+    assert list(engine.acoustic.predict(engine.acoustic.featurize(fresh))) == list(SCENES)
+
+
+def test_start_and_stop_leave_no_thread_behind(recognisers):
+    before = set(threading.enumerate())
+    engine = build_demo_engine(seed=1, realtime=False)
+    events = collect(engine)
+    engine.start()
+    assert engine.running
+    while not any(isinstance(e, Decision) for e in events):
+        assert engine.running
+        threading.Event().wait(0.05)
+    engine.stop()
+    engine.stop()  # idempotent
+    assert not engine.running
+    assert set(threading.enumerate()) <= before
+
+
+def test_record_window_returns_the_next_seconds_of_the_source():
+    rate = 8000
+    ramp = (np.arange(rate * 20) % 30011).astype(np.float32) / 30011  # every sample identifiable
+    engine = Engine(audio=PacedAudio([Clip(None, ramp)], rate, realtime=True))
+    with pytest.raises(ServantError, match="not running"):
+        engine.record_window(1.0)
+    with engine:
+        got = engine.record_window(1.0)
+    start = int(np.argmin(np.abs(ramp[:30011] - got[0])))
+    assert len(got) == rate
+    assert np.array_equal(got, ramp[start : start + rate])
+
+
+def test_take_picture_and_errors_without_a_camera(recognisers):
+    engine = build_demo_engine(seed=0, realtime=False)
+    picture = engine.take_picture()
+    assert picture.ndim == 3 and picture.dtype == np.uint8
+    with pytest.raises(ServantError, match="camera"):
+        Engine().take_picture()
+
+
+class OpenSetVisual(PaperVisualRecogniser):
+    """The open-set recognisers are another helper's work: this stand-in says UNKNOWN below a
+    confidence threshold, as they do, on top of the real paper recogniser."""
+
+    def predict(self, X):
+        names = super().predict(X)
+        return np.where(self.confidence(X) < 0, UNKNOWN, names)
+
+
+def test_an_unknown_picture_is_asked_about_and_labelled_into_the_library(tmp_path, recognisers):
+    acoustic, _ = recognisers
+    pictures = [synth_picture(s, np.random.default_rng([1, i])) for i, s in enumerate(SCENES * 3)]
+    visual = OpenSetVisual().fit(OpenSetVisual().featurize(pictures), list(SCENES * 3))
+    clock = ManualClock()
+    purple = np.full((120, 160, 3), (200, 30, 160), np.uint8)  # no demo place is purple
+
+    class PurpleCamera:
+        name = "purple"
+
+        def open(self): ...
+        def read(self):
+            return purple
+
+        def close(self): ...
+
+    audio = PacedAudio(
+        [Clip("coffee", synth_window("coffee", np.random.default_rng(3)))],
+        DEMO_RATE,
+        realtime=False,
+        clock=clock,
+    )
+    engine = Engine(
+        audio=audio,
+        camera=PurpleCamera(),
+        acoustic=acoustic,
+        visual=visual,
+        clock=clock,
+        library_root=tmp_path / "lib",
+    )
+    events = collect(engine)
+    engine.run_until(1e9)
+    asked = [e for e in events if isinstance(e, UnknownScene)]
+    assert asked and asked[0].sense == "image"
+    assert any(isinstance(e, VisualPrediction) and e.scene is None for e in events)
+    path = engine.label_unknown(asked[0].window_id, "lavender_room")
+    assert path.parent == tmp_path / "lib" / "lavender_room" and path.suffix == ".png"
+    assert np.array_equal(cv2.imread(str(path)), purple)
+    assert engine.retrain_needed  # the paper recogniser has no fold_in
+    with pytest.raises(ServantError, match="no such unknown window"):
+        engine.label_unknown(asked[0].window_id, "lavender_room")
+    with pytest.raises(ServantError, match="plain folder name"):
+        engine.label_unknown(asked[-1].window_id, "../escape")
+
+
+def test_a_detected_scene_moves_the_arm_to_its_pose_only_when_armed(recognisers):
+    """The real servo link, talking Maestro to the project's controller emulator on a pty."""
+    poses = {"coffee": {"shoulder": 30.0, "elbow": 90.0, "gripper": 0.0}}
+    emulator, port = start_emulator("maestro")
+    clock = LinkClock()
+    link = ServoLink.open(port, "maestro", default_joints(), clock=clock, sleep=clock.sleep)
+    try:
+        for armed in (False, True):
+            engine = build_demo_engine(seed=0, realtime=False)
+            events = collect(engine)
+            engine.set_arm(link)
+            engine.set_action_learner(poses.get)
+            if armed:
+                engine.arm()
+            else:
+                engine.disarm()
+            engine.run_until(12.0)  # the first CoffeeScene detected comes at ~9 s
+            engine.stop()
+            assert any(isinstance(e, Decision) and e.scene == "coffee" for e in events)
+            if not armed:
+                assert link.goal == {}  # detected, but a disarmed arm is never sent a pose
+        assert link.goal == poses["coffee"]
+        # Sent in rate-limited steps (on the link's manual clock) all the way to the pose; the
+        # emulated servos follow at their own speed.
+        assert link.commanded == pytest.approx(poses["coffee"])
+        assert emulator.pulse(3) > 1000.0  # the shoulder (channel 3) left 0° = 1000 µs
+        assert any(isinstance(e, ArmState) and e.armed for e in events)
+    finally:
+        link.close()
+        emulator.stop()
+    with pytest.raises(ServantError, match="no arm attached"):
+        Engine().arm()
+
+
+def test_a_model_for_another_window_length_is_reported_once_and_the_engine_goes_on(recognisers):
+    acoustic, visual = recognisers
+    clock = ManualClock()
+    audio = PacedAudio(
+        [Clip("gym", synth_window("gym", np.random.default_rng(k))) for k in range(4)],
+        DEMO_RATE,
+        realtime=False,
+        clock=clock,
+    )
+    engine = Engine(audio=audio, acoustic=acoustic, clock=clock, window_seconds=2.0)
+    events = collect(engine)
+    engine.run_until(1e9)
+    errors = [e for e in events if isinstance(e, ErrorEvent)]
+    assert len(errors) == 1 and "acoustic prediction failed" in errors[0].message
+    assert round(clock()) == 20  # it played everything
+
+
+def test_replaying_real_recordings_at_another_rate(shared_data, recognisers):
+    """A 44.1 kHz real recording replayed into a 16 kHz model: the engine resamples each window."""
+    path = shared_data / "audio/dev/street/moodist-traffic.mp3"
+    acoustic, _ = recognisers
+    clock = ManualClock()
+    clip = read_audio(path, 44100)[: 44100 * 10]
+    engine = Engine(
+        audio=PacedAudio([Clip("street", clip)], 44100, realtime=False, clock=clock),
+        acoustic=acoustic,
+        clock=clock,
+        fusion=SequentialFusion(FusionConfig()),
+    )
+    events = collect(engine)
+    engine.run_until(1e9)
+    heard = [e for e in events if isinstance(e, AcousticPrediction)]
+    assert len(heard) == 2 and all(e.scene in SCENES for e in heard)
