@@ -12,9 +12,9 @@ from collections.abc import Sequence
 from typing import Any, ClassVar, Self
 
 import numpy as np
+from scipy.spatial.distance import cdist
 from sklearn.cluster import KMeans
 from sklearn.exceptions import NotFittedError
-from sklearn.metrics.pairwise import euclidean_distances
 
 from servant_core.audio import DEFAULT_RATE, DEFAULT_WINDOW_SECONDS
 from servant_core.features.palette import DEFAULT_COLOURS, dominant_colours
@@ -66,7 +66,13 @@ class KMeansSceneRecogniser:
     def distances(self, X: np.ndarray) -> np.ndarray:
         """(n, K) Euclidean distances from each row to each centroid."""
         self._check_fitted()
-        return euclidean_distances(np.asarray(X, dtype=np.float32), self.centres_)
+        X = np.asarray(X, dtype=np.float32)
+        # scipy's cdist is ~10x faster than sklearn's float32 path for a few long rows (the live
+        # case); chunks keep its float64 copy of X small when a whole test set is scored
+        chunk = 64
+        return np.vstack(
+            [cdist(X[i : i + chunk], self.centres_) for i in range(0, max(len(X), 1), chunk)]
+        )
 
     def nearest(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(cluster index, distance) of each row's nearest centroid: K-Means' `predict`."""
