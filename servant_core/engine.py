@@ -62,6 +62,7 @@ log = logging.getLogger(__name__)
 
 Subscriber = Callable[[Event], None]
 Pose = Mapping[str, float]
+PoseFor = Callable[[str, dict[str, dict[str, float]], float], Pose | None]
 
 SPECTRUM_SIZE = 2048
 SPECTRUM_FPS = 30.0
@@ -147,7 +148,8 @@ class Engine:
         self._thread: threading.Thread | None = None
         self._arm_pool: ThreadPoolExecutor | None = None
         self._link: Any = None
-        self._pose_for: Callable[[str], Pose | None] | None = None
+        self._pose_for: PoseFor | None = None
+        self._cleanups: list[Callable[[], None]] = []
 
         self._opened = False
         self._ring: RingBuffer | None = None
@@ -233,6 +235,12 @@ class Engine:
         pool, self._arm_pool = self._arm_pool, None
         if pool is not None:
             pool.shutdown(wait=True)
+        while self._cleanups:
+            self._cleanups.pop()()
+
+    def add_cleanup(self, close: Callable[[], None]) -> None:
+        """Run `close` when the engine stops (last added, first run): what it owns, it closes."""
+        self._cleanups.append(close)
 
     def join(self, timeout: float | None = None) -> bool:
         """Wait until a finite audio source (a replay) has been played out; False on timeout."""
@@ -462,9 +470,11 @@ class Engine:
 
     # --- actions and the arm ------------------------------------------------------------------
 
-    def set_action_learner(self, pose_for: Callable[[str], Pose | None] | None) -> None:
-        """Attach what turns a detected scene into a pose: any callable scene → {joint: degrees}
-        or None (e.g. the bound prediction method of the action learner). None detaches it."""
+    def set_action_learner(self, pose_for: PoseFor | None) -> None:
+        """Attach what turns a detected scene into a pose: a callable
+        (scene, scores, confidence) → {joint: degrees} or None, e.g. `ActionLearner.pose_for`.
+        `scores` are the latest per-sense scene scores; `confidence` (percent) is the smaller of
+        the two senses' probabilities for the scene. None detaches it."""
         self._pose_for = pose_for
 
     def set_arm(self, link: Any) -> None:
@@ -502,8 +512,10 @@ class Engine:
         link, pose_for, pool = self._link, self._pose_for, self._arm_pool
         if link is None or pose_for is None or not link.armed:
             return
+        scores = self.latest_scores()
+        confidence = 100.0 * min(scores[sense].get(scene, 0.0) for sense in ("acoustic", "visual"))
         try:
-            pose = pose_for(scene)
+            pose = pose_for(scene, scores, confidence)
         except ServantError as error:
             self._error(str(error))
             return
@@ -667,9 +679,11 @@ def build_demo_engine(
     realtime: bool = True,
     fusion: FusionPolicy | None = None,
     library_root: str | Path | None = None,
+    arm: bool = True,
 ) -> Engine:
     """The built-in demo: the paper's recognisers trained on freshly synthesised scenes (a couple
-    of seconds), then the synthesised walk (see `servant_core.demo.scenes`).
+    of seconds), then the synthesised walk (see `servant_core.demo.scenes`). With `arm`, an
+    emulated arm (`servant_core.demo.arm`), disarmed, that the engine closes when it stops.
 
     `realtime=False` runs the walk as fast as possible on a `ManualClock` (pass your own to read
     it), so events — times included — are the same on every run: use `engine.run_until(t)` for a
@@ -683,7 +697,7 @@ def build_demo_engine(
     clock = clock or MonotonicClock()
     acoustic, visual = train_demo_recognisers(seed)
     audio = demo_audio(seed, realtime=realtime, clock=clock if not realtime else None)
-    return Engine(
+    engine = Engine(
         audio=audio,
         camera=DemoCamera(clock, seed),
         acoustic=acoustic,
@@ -692,6 +706,15 @@ def build_demo_engine(
         clock=clock,
         library_root=library_root,
     )
+    if arm:
+        from servant_core.demo.arm import demo_learner, start_demo_arm
+
+        emulator, link = start_demo_arm()
+        engine.add_cleanup(emulator.stop)
+        engine.add_cleanup(link.close)  # runs first: the link closes before its emulator
+        engine.set_arm(link)
+        engine.set_action_learner(demo_learner().pose_for)
+    return engine
 
 
 @dataclass(frozen=True)

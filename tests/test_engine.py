@@ -208,10 +208,10 @@ def test_a_detected_scene_moves_the_arm_to_its_pose_only_when_armed(recognisers)
     link = ServoLink.open(port, "maestro", default_joints(), clock=clock, sleep=clock.sleep)
     try:
         for armed in (False, True):
-            engine = build_demo_engine(seed=0, realtime=False)
+            engine = build_demo_engine(seed=0, realtime=False, arm=False)
             events = collect(engine)
             engine.set_arm(link)
-            engine.set_action_learner(poses.get)
+            engine.set_action_learner(lambda scene, scores, confidence: poses.get(scene))
             if armed:
                 engine.arm()
             else:
@@ -267,3 +267,22 @@ def test_replaying_real_recordings_at_another_rate(shared_data, recognisers):
     engine.run_until(1e9)
     heard = [e for e in events if isinstance(e, AcousticPrediction)]
     assert len(heard) == 2 and all(e.scene in SCENES for e in heard)
+
+
+def test_the_demo_arm_holds_the_cup_in_the_cafe_once_armed():
+    """The demo's own arm: emulator on a pty, real link, action learner taught the demo poses."""
+    from servant_core.demo.arm import POSES
+
+    engine = build_demo_engine(seed=0, realtime=False)
+    events = collect(engine)
+    link = engine._link
+    assert link is not None and not link.armed
+    engine.arm()
+    engine.run_until(12.0)  # the first CoffeeScene detected comes at ~9 s
+    assert any(isinstance(e, Decision) and e.scene == "coffee" for e in events)
+    # the learner maps the perceived (not one-hot) scores: its pose is nearest the café's
+    goal = np.array([link.goal[j] for j in ("shoulder", "elbow", "gripper")])
+    distance = {s: np.linalg.norm(goal - np.array(list(p.values()))) for s, p in POSES.items()}
+    assert min(distance, key=distance.get) == "coffee"
+    engine.stop()
+    assert not link.armed and link._serial is None  # the engine closed what it owned
