@@ -6,9 +6,13 @@ from typing import Any
 
 from servant_core.errors import ServantError
 from servant_core.recognisers.base import UNKNOWN, Recogniser
+from servant_core.recognisers.codebook import CodebookAcousticRecogniser
 from servant_core.recognisers.paper import PaperAcousticRecogniser, PaperVisualRecogniser
 
-ACOUSTIC_METHODS: dict[str, type] = {"paper": PaperAcousticRecogniser}
+ACOUSTIC_METHODS: dict[str, type] = {
+    "paper": PaperAcousticRecogniser,
+    "codebook": CodebookAcousticRecogniser,
+}
 VISUAL_METHODS: dict[str, type] = {"paper": PaperVisualRecogniser}
 
 
