@@ -6,6 +6,7 @@ from typing import Any
 
 from servant_core.errors import ServantError
 from servant_core.recognisers.base import UNKNOWN, Recogniser
+from servant_core.recognisers.bovw import BovwVisualRecogniser
 from servant_core.recognisers.codebook import CodebookAcousticRecogniser
 from servant_core.recognisers.paper import PaperAcousticRecogniser, PaperVisualRecogniser
 
@@ -13,7 +14,7 @@ ACOUSTIC_METHODS: dict[str, type] = {
     "paper": PaperAcousticRecogniser,
     "codebook": CodebookAcousticRecogniser,
 }
-VISUAL_METHODS: dict[str, type] = {"paper": PaperVisualRecogniser}
+VISUAL_METHODS: dict[str, type] = {"paper": PaperVisualRecogniser, "bovw": BovwVisualRecogniser}
 
 
 def methods_for(sense: str) -> dict[str, type]:

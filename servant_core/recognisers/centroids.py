@@ -17,6 +17,7 @@ from typing import Any, ClassVar, Self
 
 import numpy as np
 from sklearn.cluster import KMeans
+from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
 from sklearn.exceptions import NotFittedError
 from sklearn.metrics.pairwise import euclidean_distances
 
@@ -142,6 +143,7 @@ class CentroidRecogniser:
     sense: ClassVar[str]
 
     clusters_per_scene: int
+    discriminant: bool
     reject_quantile: float
     reject_margin: float
     random_state: int | None
@@ -168,8 +170,15 @@ class CentroidRecogniser:
         self.mean_ = D.mean(axis=0)
         # Codewords no training row uses have no spread; they must not divide by zero.
         self.scale_ = np.where(D.std(axis=0) > 1e-9, D.std(axis=0), 1.0)
+        D = self._standardise(D)
+        if self.discriminant:
+            # A light linear step before the centroids: the directions that best separate the
+            # training scenes (shrunk LDA, stable with fewer rows than dimensions).
+            lda = LinearDiscriminantAnalysis(solver="eigen", shrinkage="auto").fit(D, scenes)
+            self.projection_ = lda.scalings_[:, : len(lda.classes_) - 1]
+            D = self._project(D)
         self.head_ = SceneCentroids.fit(
-            self._standardise(D),
+            D,
             scenes,
             self.clusters_per_scene,
             self.reject_quantile,
@@ -190,10 +199,16 @@ class CentroidRecogniser:
     def _standardise(self, D: np.ndarray) -> np.ndarray:
         return (D - self.mean_) / self.scale_
 
+    def _project(self, D: np.ndarray) -> np.ndarray:
+        if not self.discriminant:
+            return D
+        return D @ self.projection_
+
     def descriptors(self, X: np.ndarray) -> np.ndarray:
-        """Standardised descriptors: the space the scene centroids live in."""
+        """Standardised (and, when `discriminant`, projected) descriptors: the space the scene
+        centroids live in."""
         self._check_fitted()
-        return self._standardise(self.describe(X))
+        return self._project(self._standardise(self.describe(X)))
 
     def predict(self, X: np.ndarray) -> np.ndarray:
         return self.head_.predict(self.descriptors(X))
@@ -220,6 +235,8 @@ class CentroidRecogniser:
         self._check_fitted()
         head, head_arrays = self.head_.state()
         arrays = {"mean": self.mean_, "scale": self.scale_, **head_arrays}
+        if self.discriminant:
+            arrays["projection"] = self.projection_
         arrays.update(self._codebook_arrays())
         return {"params": self.params(), **head}, arrays
 
@@ -228,6 +245,8 @@ class CentroidRecogniser:
         model = cls(**header["params"])
         model.mean_ = np.asarray(arrays["mean"], dtype=np.float64)
         model.scale_ = np.asarray(arrays["scale"], dtype=np.float64)
+        if model.discriminant:
+            model.projection_ = np.asarray(arrays["projection"], dtype=np.float64)
         model.head_ = SceneCentroids.from_state(header, arrays)
         model._load_codebook_arrays(arrays)
         return model

@@ -55,6 +55,7 @@ class CodebookAcousticRecogniser(CentroidRecogniser):
         fmax: float = DEFAULT_FMAX,
         n_codewords: int = 32,
         clusters_per_scene: int = 3,
+        discriminant: bool = False,
         max_codebook_frames: int = 20000,
         reject_quantile: float = 0.95,
         reject_margin: float = 1.5,
@@ -68,6 +69,7 @@ class CodebookAcousticRecogniser(CentroidRecogniser):
         self.fmax = fmax
         self.n_codewords = n_codewords
         self.clusters_per_scene = clusters_per_scene
+        self.discriminant = discriminant
         self.max_codebook_frames = max_codebook_frames
         self.reject_quantile = reject_quantile
         self.reject_margin = reject_margin
@@ -83,6 +85,7 @@ class CodebookAcousticRecogniser(CentroidRecogniser):
             "fmax": self.fmax,
             "n_codewords": self.n_codewords,
             "clusters_per_scene": self.clusters_per_scene,
+            "discriminant": self.discriminant,
             "max_codebook_frames": self.max_codebook_frames,
             "reject_quantile": self.reject_quantile,
             "reject_margin": self.reject_margin,
