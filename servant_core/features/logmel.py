@@ -18,8 +18,9 @@ DEFAULT_HOP = 512
 DEFAULT_N_MELS = 40
 DEFAULT_FMIN = 60.0
 DEFAULT_FMAX = 10500.0
-# Energies below this (relative to full scale, ~-100 dB) are silence; the floor keeps log finite.
-ENERGY_FLOOR = 1e-10
+# Energies more than 80 dB below the window's loudest band are treated as that floor: it keeps the
+# log finite, and being relative to the window it scales with the gain, so it cancels too.
+DYNAMIC_RANGE = 1e-8
 
 
 def hz_to_mel(hz: np.ndarray | float) -> np.ndarray:
@@ -74,5 +75,6 @@ def log_mel_frames(
     frames = frame_signal(window, n_fft, hop) * np.hanning(n_fft).astype(np.float32)
     power = np.abs(np.fft.rfft(frames, axis=1)) ** 2
     energies = power @ mel_filterbank(rate, n_fft, n_mels, fmin, fmax).T
-    log_energies = np.log10(energies + ENERGY_FLOOR * n_fft)
+    floor = max(float(energies.max()) * DYNAMIC_RANGE, np.finfo(np.float32).tiny)
+    log_energies = np.log10(np.maximum(energies, floor))
     return (log_energies - log_energies.mean()).astype(np.float32)

@@ -211,10 +211,12 @@ class CentroidRecogniser:
         return self._project(self._standardise(self.describe(X)))
 
     def predict(self, X: np.ndarray) -> np.ndarray:
-        return self.head_.predict(self.descriptors(X))
+        D = self.descriptors(X)
+        return self.head_.predict(D)
 
     def predict_proba(self, X: np.ndarray) -> np.ndarray:
-        return self.head_.proba(self.descriptors(X))
+        D = self.descriptors(X)
+        return self.head_.proba(D)
 
     def confidence(self, X: np.ndarray) -> np.ndarray:
         """The probability of the most likely scene, in percent."""
@@ -222,7 +224,8 @@ class CentroidRecogniser:
 
     def novelty(self, X: np.ndarray) -> np.ndarray:
         """Distance to the nearest centroid in spreads; above `head_.reject_distance` = unknown."""
-        return self.head_.nearest_scaled(self.descriptors(X))
+        D = self.descriptors(X)
+        return self.head_.nearest_scaled(D)
 
     def fold_in(self, X: np.ndarray, scenes: Sequence[str]) -> Self:
         """Fold rows with confirmed labels into the model without refitting (codebooks stay)."""
