@@ -17,7 +17,8 @@ import numpy as np
 from sklearn.metrics import confusion_matrix
 
 from servant_core.errors import ServantError
-from servant_core.fusion import POLICIES, FusionConfig
+from servant_core.events import Decision
+from servant_core.fusion import POLICIES, FusionConfig, scene_line
 from servant_core.library import (
     Picture,
     SceneLibrary,
@@ -221,6 +222,9 @@ def run_fusion(
     """One scene encounter in simulated time: the acoustic prediction at t=0, then pictures as
     the policy asks for them (cycling through `visual`), until a decision. Returns the Decision."""
     policy = POLICIES[policy_name](config)
+    if acoustic[0] == UNKNOWN:
+        # An unknown place opens no window in any policy: nothing to confirm, no decision.
+        return Decision(0.0, None, 0.0, scene_line(None))
     t = 0.0
     step = config.picture_interval_s / 4
     events = policy.on_acoustic(acoustic[0], acoustic[1], t)

@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Protocol
 
 from servant_core.events import Decision, FusionState
+from servant_core.fusion.parallel import ParallelFusion
 from servant_core.fusion.sequential import FusionConfig, SequentialFusion, scene_line
 
 
@@ -24,6 +25,13 @@ class FusionPolicy(Protocol):
     def state(self, t: float) -> FusionState: ...
 
 
-POLICIES: dict[str, type] = {"sequential": SequentialFusion}
+POLICIES: dict[str, type] = {"sequential": SequentialFusion, "parallel": ParallelFusion}
 
-__all__ = ["POLICIES", "FusionConfig", "FusionPolicy", "SequentialFusion", "scene_line"]
+__all__ = [
+    "POLICIES",
+    "FusionConfig",
+    "FusionPolicy",
+    "ParallelFusion",
+    "SequentialFusion",
+    "scene_line",
+]

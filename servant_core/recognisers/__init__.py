@@ -6,10 +6,18 @@ from typing import Any, cast
 
 from servant_core.errors import ServantError
 from servant_core.recognisers.base import UNKNOWN, AcousticRecogniser, Recogniser
+from servant_core.recognisers.bovw import BovwVisualRecogniser
+from servant_core.recognisers.codebook import CodebookAcousticRecogniser
 from servant_core.recognisers.paper import PaperAcousticRecogniser, PaperVisualRecogniser
 
-ACOUSTIC_METHODS: dict[str, type[Recogniser]] = {"paper": PaperAcousticRecogniser}
-VISUAL_METHODS: dict[str, type[Recogniser]] = {"paper": PaperVisualRecogniser}
+ACOUSTIC_METHODS: dict[str, type[Recogniser]] = {
+    "paper": PaperAcousticRecogniser,
+    "codebook": CodebookAcousticRecogniser,
+}
+VISUAL_METHODS: dict[str, type[Recogniser]] = {
+    "paper": PaperVisualRecogniser,
+    "bovw": BovwVisualRecogniser,
+}
 
 
 def methods_for(sense: str) -> dict[str, type[Recogniser]]:

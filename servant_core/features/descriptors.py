@@ -1,0 +1,74 @@
+"""Dense local descriptors of a picture: gradient-orientation blocks and their colours.
+
+A picture is centre-cropped to a square and shrunk to `size`×`size` pixels (a 640×480 camera
+frame and a 128×128 library picture then give the same grid), cut into `cell`×`cell` cells, and
+every 2×2 block of cells (overlapping, one cell apart) is described by:
+
+- its gradient orientations: a histogram of `n_bins` unsigned orientations per cell, weighted by
+  gradient magnitude, the four cells concatenated and scaled to unit length (HOG-like, so that
+  lighting contrast cancels);
+- its colour: the block's mean CIE L*a*b* colour (L in 0–100, a and b about ±100).
+
+These are what the `bovw` method's K-Means codebooks are learned from.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+DEFAULT_SIZE = 128
+DEFAULT_CELL = 8
+DEFAULT_BINS = 9
+
+
+def square_thumbnail(image_bgr: np.ndarray, size: int = DEFAULT_SIZE) -> np.ndarray:
+    """The picture's central square, resized to `size`×`size` (area averaging when shrinking)."""
+    if image_bgr.ndim != 3 or image_bgr.shape[2] != 3:
+        raise ValueError("expected a BGR picture of shape (height, width, 3)")
+    h, w = image_bgr.shape[:2]
+    side = min(h, w)
+    top, left = (h - side) // 2, (w - side) // 2
+    square = image_bgr[top : top + side, left : left + side]
+    interpolation = cv2.INTER_AREA if side > size else cv2.INTER_LINEAR
+    return cv2.resize(square, (size, size), interpolation=interpolation)
+
+
+def cell_sums(values: np.ndarray, cell: int) -> np.ndarray:
+    """Sum an (H, W, ...) array over non-overlapping cell×cell cells: (H/cell, W/cell, ...)."""
+    h, w = values.shape[:2]
+    return values.reshape(h // cell, cell, w // cell, cell, *values.shape[2:]).sum(axis=(1, 3))
+
+
+def blocks(cells: np.ndarray) -> np.ndarray:
+    """Every overlapping 2×2 block of an (R, C, d) cell grid: (R-1, C-1, 4d)."""
+    return np.concatenate(
+        [cells[:-1, :-1], cells[:-1, 1:], cells[1:, :-1], cells[1:, 1:]], axis=-1
+    )
+
+
+def dense_descriptors(
+    image_bgr: np.ndarray,
+    size: int = DEFAULT_SIZE,
+    cell: int = DEFAULT_CELL,
+    n_bins: int = DEFAULT_BINS,
+) -> np.ndarray:
+    """(blocks, 4·n_bins + 3) float32: unit-length orientation blocks, then mean L*a*b* colour.
+
+    Blocks are in row-major grid order, so a block's index gives its place in the picture.
+    """
+    thumb = square_thumbnail(image_bgr, size)
+    grey = cv2.cvtColor(thumb, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=1)
+    gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=1)
+    magnitude, angle = cv2.cartToPolar(gx, gy)
+    orientation = np.minimum((angle % np.pi) / np.pi * n_bins, n_bins - 1).astype(np.intp)
+    votes = np.zeros((size, size, n_bins), dtype=np.float32)
+    np.put_along_axis(votes, orientation[..., None], magnitude[..., None], axis=2)
+    gradient_blocks = blocks(cell_sums(votes, cell))
+    gradient_blocks /= np.linalg.norm(gradient_blocks, axis=-1, keepdims=True) + 1e-6
+    lab = cv2.cvtColor(thumb.astype(np.float32) / 255.0, cv2.COLOR_BGR2Lab)
+    colour_cells = cell_sums(lab, cell) / (cell * cell)
+    colour_blocks = blocks(colour_cells).reshape(*colour_cells[1:, 1:].shape[:2], 4, 3).mean(axis=2)
+    out = np.concatenate([gradient_blocks, colour_blocks], axis=-1)
+    return out.reshape(-1, out.shape[-1]).astype(np.float32)

@@ -1,0 +1,115 @@
+"""Parallel fusion (the paper's future work): hear and look at the same time.
+
+Pictures are taken every `picture_interval_s` all the time, not only after a sound, and each
+5 s window's acoustic prediction replaces the previous one. A scene is decided as soon as the
+latest acoustic prediction names it with at least `min_acoustic_confidence` and, among the
+pictures of the last `confirm_window_s`, it has at least `pictures_needed` votes and more than
+any other scene (unknown pictures do not vote). One wrong picture cannot confirm a wrong sound,
+and one right picture need not wait for a 30 s window: a decision typically comes a few seconds
+after entering a scene. If nothing agrees within `acoustic_window_s` of the first acoustic
+prediction, it says `No scene detected`, forgets, and goes on, as the paper's policy does.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+
+from servant_core.events import Decision, FusionState
+from servant_core.fusion.sequential import NO_SCENE, FusionConfig, scene_line
+from servant_core.recognisers.base import UNKNOWN
+
+
+class ParallelFusion:
+    def __init__(
+        self, config: FusionConfig | None = None, *, min_acoustic_confidence: float = 0.0
+    ) -> None:
+        self.config = config or FusionConfig()
+        self.min_acoustic_confidence = min_acoustic_confidence
+        self.last_picture_at: float | None = None
+        self._restart()
+
+    def _restart(self) -> None:
+        self.scene: str | None = None  # the latest acoustic opinion
+        self.acoustic_confidence = 0.0
+        self.opened_at: float | None = None  # first acoustic opinion since the last decision
+        self.pictures: list[tuple[float, str, float]] = []  # (time, scene, confidence)
+
+    def _recent(self, t: float) -> list[tuple[float, str, float]]:
+        window = self.config.confirm_window_s
+        return [p for p in self.pictures if t - p[0] <= window]
+
+    def _agreeing(self, t: float) -> list[float]:
+        """Confidences of recent pictures naming the acoustic scene, if it leads the vote."""
+        recent = self._recent(t)
+        votes = Counter(scene for _, scene, _ in recent)
+        if self.scene is None or votes[self.scene] < self.config.pictures_needed:
+            return []
+        if any(n >= votes[self.scene] for s, n in votes.items() if s != self.scene):
+            return []
+        return [c for _, scene, c in recent if scene == self.scene]
+
+    @property
+    def phase(self) -> str:
+        if self.scene is None:
+            return "listening"
+        return "confirming" if any(s == self.scene for _, s, _ in self.pictures) else "looking"
+
+    def state(self, t: float) -> FusionState:
+        left = None
+        if self.opened_at is not None:
+            left = max(0.0, self.opened_at + self.config.acoustic_window_s - t)
+        return FusionState(t, self.phase, self.scene, left, len(self._recent(t)))
+
+    def _decide(self, t: float) -> list[Decision | FusionState]:
+        agreeing = self._agreeing(t)
+        if not agreeing or self.acoustic_confidence < self.min_acoustic_confidence:
+            return [self.state(t)]
+        visual = sum(agreeing) / len(agreeing)
+        scene = self.scene
+        decision = Decision(
+            t,
+            scene,
+            (self.acoustic_confidence + visual) / 2.0,
+            scene_line(scene),
+            self.acoustic_confidence,
+            visual,
+        )
+        self._restart()
+        return [decision, self.state(t)]
+
+    def tick(self, t: float) -> list[Decision | FusionState]:
+        """Give up on the current opinion once `acoustic_window_s` has passed without agreement."""
+        self.pictures = self._recent(t)
+        if self.opened_at is None or t - self.opened_at <= self.config.acoustic_window_s:
+            return []
+        decision = Decision(t, None, 0.0, NO_SCENE, self.acoustic_confidence, 0.0)
+        self._restart()
+        return [decision, self.state(t)]
+
+    def on_acoustic(
+        self, scene: str | None, confidence: float, t: float
+    ) -> list[Decision | FusionState]:
+        events = self.tick(t)
+        if scene is None or scene == UNKNOWN:
+            self.scene, self.acoustic_confidence = None, 0.0
+            return [*events, self.state(t)]
+        self.scene, self.acoustic_confidence = scene, float(confidence)
+        if self.opened_at is None:
+            self.opened_at = t
+        return [*events, *self._decide(t)]
+
+    def on_visual(
+        self, scene: str | None, confidence: float, t: float
+    ) -> list[Decision | FusionState]:
+        events = self.tick(t)
+        self.last_picture_at = t
+        if scene is not None and scene != UNKNOWN:
+            self.pictures.append((t, scene, float(confidence)))
+        return [*events, *self._decide(t)]
+
+    def wants_picture(self, t: float) -> bool:
+        """Always looking: a picture every `picture_interval_s`, whatever the sound says."""
+        return (
+            self.last_picture_at is None
+            or t - self.last_picture_at >= self.config.picture_interval_s
+        )

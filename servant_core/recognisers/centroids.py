@@ -1,0 +1,286 @@
+"""Per-scene K-Means centroids over window or picture descriptors, with an open set.
+
+The head both K-Means-centred methods beyond the paper share (`codebook` for sound, `bovw` for
+pictures): each scene's training descriptors are clustered by K-Means into a few centroids, each
+with its own spread. A row's per-scene probabilities come from its distances to the centroids
+scaled by their spreads (`scene_probabilities`); a row farther than `reject_distance` spreads
+from every centroid is a place the model does not know (`UNKNOWN`), not a forced guess. A
+confirmed label folds in without refitting: the nearest centroid of that scene moves toward the
+row as a running mean, or a new scene gets its own centroid.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar, Self
+
+import numpy as np
+from sklearn.cluster import KMeans
+from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
+from sklearn.exceptions import NotFittedError
+from sklearn.metrics.pairwise import euclidean_distances
+
+from servant_core.recognisers.base import (
+    UNKNOWN,
+    check_training_scenes,
+    cluster_spreads,
+    scene_probabilities,
+)
+
+
+@dataclass
+class SceneCentroids:
+    """Fitted centroids: `centres` (K, d), `cluster_scene` (K,), `spreads` and `counts` (K,)."""
+
+    scenes: list[str]
+    centres: np.ndarray
+    cluster_scene: list[str]
+    spreads: np.ndarray
+    counts: np.ndarray
+    reject_distance: float
+
+    @classmethod
+    def fit(
+        cls,
+        D: np.ndarray,
+        scenes: Sequence[str],
+        clusters_per_scene: int,
+        reject_quantile: float,
+        reject_margin: float,
+        random_state: int | None,
+    ) -> SceneCentroids:
+        """Cluster each scene's rows; calibrate the rejection on the training rows themselves.
+
+        `reject_distance` is the `reject_quantile` of the training rows' distances to their own
+        centroid, in units of that centroid's spread, times `reject_margin` (training rows sit
+        closer to centroids fitted on them than later windows of the same place will).
+        """
+        scenes_arr = np.asarray(scenes)
+        names = sorted(set(scenes_arr.tolist()))
+        centres: list[np.ndarray] = []
+        owner: list[str] = []
+        assigned = np.empty(len(D), dtype=int)
+        for scene in names:
+            rows = np.flatnonzero(scenes_arr == scene)
+            k = min(clusters_per_scene, len(rows))
+            kmeans = KMeans(n_clusters=k, n_init=3, random_state=random_state).fit(D[rows])
+            assigned[rows] = len(centres) + kmeans.labels_
+            centres += list(kmeans.cluster_centers_)
+            owner += [scene] * k
+        centre_arr = np.asarray(centres, dtype=np.float64)
+        spreads = cluster_spreads(D, assigned, centre_arr)
+        counts = np.bincount(assigned, minlength=len(centre_arr)).astype(np.float64)
+        own = np.linalg.norm(D - centre_arr[assigned], axis=1) / spreads[assigned]
+        reject = float(np.quantile(own, reject_quantile) * reject_margin)
+        return cls(names, centre_arr, owner, spreads, counts, reject)
+
+    def distances(self, D: np.ndarray) -> np.ndarray:
+        return euclidean_distances(D, self.centres)
+
+    def proba(self, D: np.ndarray) -> np.ndarray:
+        return scene_probabilities(self.distances(D), self.spreads, self.cluster_scene, self.scenes)
+
+    def nearest_scaled(self, D: np.ndarray) -> np.ndarray:
+        """Each row's distance to its nearest centroid, in units of that centroid's spread."""
+        return np.min(self.distances(D) / self.spreads[None, :], axis=1)
+
+    def predict(self, D: np.ndarray) -> np.ndarray:
+        probs = self.proba(D)
+        names = np.asarray(self.scenes, dtype=object)[np.argmax(probs, axis=1)]
+        names[self.nearest_scaled(D) > self.reject_distance] = UNKNOWN
+        return names.astype(str)
+
+    def fold_in(self, D: np.ndarray, scenes: Sequence[str]) -> None:
+        """Add confirmed rows: a known scene's nearest centroid takes a running-mean step toward
+        each row (its spread updated the same way); an unknown scene gets a new centroid."""
+        for row, scene in zip(D, scenes, strict=True):
+            own = [c for c, s in enumerate(self.cluster_scene) if s == scene]
+            if not own:
+                self.scenes = sorted([*self.scenes, scene])
+                self.centres = np.vstack([self.centres, row])
+                self.cluster_scene.append(scene)
+                self.spreads = np.append(self.spreads, np.median(self.spreads))
+                self.counts = np.append(self.counts, 1.0)
+                continue
+            c = own[int(np.argmin(np.linalg.norm(self.centres[own] - row, axis=1)))]
+            self.counts[c] += 1
+            step = 1.0 / self.counts[c]
+            gap = float(np.sum((row - self.centres[c]) ** 2))
+            self.spreads[c] = np.sqrt((1 - step) * self.spreads[c] ** 2 + step * (1 - step) * gap)
+            self.centres[c] += step * (row - self.centres[c])
+
+    def state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        header = {
+            "scenes": self.scenes,
+            "cluster_scene": self.cluster_scene,
+            "reject_distance": self.reject_distance,
+        }
+        arrays = {"centres": self.centres, "spreads": self.spreads, "counts": self.counts}
+        return header, arrays
+
+    @classmethod
+    def from_state(cls, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> SceneCentroids:
+        return cls(
+            list(header["scenes"]),
+            np.asarray(arrays["centres"], dtype=np.float64),
+            list(header["cluster_scene"]),
+            np.asarray(arrays["spreads"], dtype=np.float64),
+            np.asarray(arrays["counts"], dtype=np.float64),
+            float(header["reject_distance"]),
+        )
+
+
+class CentroidRecogniser:
+    """A recogniser whose learned part is codebooks (subclass) plus a `SceneCentroids` head.
+
+    Subclasses define `featurize`, `params()`, `_fit_codebooks(X)` (learn from featurized
+    training rows, store attributes ending in `_`), `describe(X)` (featurized rows to fixed
+    descriptors) and `_codebook_arrays()` / `_load_codebook_arrays(arrays)`.
+    """
+
+    method: ClassVar[str]
+    sense: ClassVar[str]
+
+    clusters_per_scene: int
+    discriminant: bool
+    reject_quantile: float
+    reject_margin: float
+    random_state: int | None
+
+    def params(self) -> dict[str, Any]:
+        raise NotImplementedError
+
+    def describe(self, X: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def _fit_codebooks(self, X: np.ndarray) -> None:
+        raise NotImplementedError
+
+    def _codebook_arrays(self) -> dict[str, np.ndarray]:
+        raise NotImplementedError
+
+    def _load_codebook_arrays(self, arrays: dict[str, np.ndarray]) -> None:
+        raise NotImplementedError
+
+    def fit(self, X: np.ndarray, scenes: Sequence[str]) -> Self:
+        check_training_scenes(scenes, len(X))
+        self._fit_codebooks(X)
+        D = self.describe(X)
+        self.mean_ = D.mean(axis=0)
+        # Codewords no training row uses have no spread; they must not divide by zero.
+        self.scale_ = np.where(D.std(axis=0) > 1e-9, D.std(axis=0), 1.0)
+        D = self._standardise(D)
+        if self.discriminant:
+            # A light linear step before the centroids: the directions that best separate the
+            # training scenes (shrunk LDA, stable with fewer rows than dimensions).
+            lda = LinearDiscriminantAnalysis(solver="eigen", shrinkage="auto").fit(D, scenes)
+            self.projection_ = lda.scalings_[:, : len(lda.classes_) - 1]
+            D = self._project(D)
+        self.head_ = SceneCentroids.fit(
+            D,
+            scenes,
+            self.clusters_per_scene,
+            self.reject_quantile,
+            self.reject_margin,
+            self.random_state,
+        )
+        return self
+
+    @property
+    def scenes_(self) -> list[str]:
+        self._check_fitted()
+        return self.head_.scenes
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "head_"):
+            raise NotFittedError(f"this {type(self).__name__} is not fitted yet; call fit first")
+
+    def _standardise(self, D: np.ndarray) -> np.ndarray:
+        return (D - self.mean_) / self.scale_
+
+    def _project(self, D: np.ndarray) -> np.ndarray:
+        if not self.discriminant:
+            return D
+        return D @ self.projection_
+
+    def descriptors(self, X: np.ndarray) -> np.ndarray:
+        """Standardised (and, when `discriminant`, projected) descriptors: the space the scene
+        centroids live in."""
+        self._check_fitted()
+        return self._project(self._standardise(self.describe(X)))
+
+    def predict(self, X: np.ndarray) -> np.ndarray:
+        D = self.descriptors(X)
+        return self.head_.predict(D)
+
+    def predict_proba(self, X: np.ndarray) -> np.ndarray:
+        D = self.descriptors(X)
+        return self.head_.proba(D)
+
+    def confidence(self, X: np.ndarray) -> np.ndarray:
+        """The probability of the most likely scene, in percent."""
+        return 100.0 * np.max(self.predict_proba(X), axis=1)
+
+    def novelty(self, X: np.ndarray) -> np.ndarray:
+        """Distance to the nearest centroid in spreads; above `head_.reject_distance` = unknown."""
+        D = self.descriptors(X)
+        return self.head_.nearest_scaled(D)
+
+    def fold_in(self, X: np.ndarray, scenes: Sequence[str]) -> Self:
+        """Fold rows with confirmed labels into the model without refitting (codebooks stay)."""
+        if len(scenes) != len(X):
+            raise ValueError(f"{len(X)} feature rows but {len(scenes)} scene labels")
+        self.head_.fold_in(self.descriptors(X), scenes)
+        return self
+
+    def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        self._check_fitted()
+        head, head_arrays = self.head_.state()
+        arrays = {"mean": self.mean_, "scale": self.scale_, **head_arrays}
+        if self.discriminant:
+            arrays["projection"] = self.projection_
+        arrays.update(self._codebook_arrays())
+        return {"params": self.params(), **head}, arrays
+
+    @classmethod
+    def from_state(cls, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> Self:
+        model = cls(**header["params"])
+        model.mean_ = np.asarray(arrays["mean"], dtype=np.float64)
+        model.scale_ = np.asarray(arrays["scale"], dtype=np.float64)
+        if model.discriminant:
+            model.projection_ = np.asarray(arrays["projection"], dtype=np.float64)
+        model.head_ = SceneCentroids.from_state(header, arrays)
+        model._load_codebook_arrays(arrays)
+        return model
+
+
+def spherical_kmeans(
+    rows: np.ndarray, n_codewords: int, max_rows: int, random_state: int | None
+) -> np.ndarray:
+    """Unit-length codewords from K-Means on unit-length rows (a subsample of at most `max_rows`).
+
+    On the unit sphere the nearest centre in Euclidean distance is the one of largest cosine,
+    so K-Means followed by renormalising its centres is spherical K-Means' usual approximation.
+    """
+    rng = np.random.default_rng(random_state)
+    if len(rows) > max_rows:
+        rows = rows[rng.choice(len(rows), max_rows, replace=False)]
+    k = min(n_codewords, len(rows))
+    kmeans = KMeans(n_clusters=k, n_init=1, random_state=random_state).fit(rows)
+    centres = kmeans.cluster_centers_
+    return (centres / np.maximum(np.linalg.norm(centres, axis=1, keepdims=True), 1e-12)).astype(
+        np.float32
+    )
+
+
+def unit_rows(X: np.ndarray) -> np.ndarray:
+    """Rows scaled to unit length (all-zero rows stay zero)."""
+    return X / np.maximum(np.linalg.norm(X, axis=-1, keepdims=True), 1e-12)
+
+
+def codeword_histograms(assigned: np.ndarray, n_codewords: int) -> np.ndarray:
+    """(n, n_codewords) share of each codeword in each row of an (n, m) assignment array."""
+    n, m = assigned.shape
+    flat = (assigned + n_codewords * np.arange(n)[:, None]).ravel()
+    return np.bincount(flat, minlength=n * n_codewords).reshape(n, n_codewords) / max(m, 1)
