@@ -6,7 +6,7 @@ windows of one recording, after the temporal split), and a picture is taken when
 asks (test pictures of the same scene after the 70/30 file-order split, predicted by the visual
 method). One encounter starts at every test window; it ends at the first decision.
 
-    python bench/fusion_latency.py [--audio-method codebook] [--image-method bovw]
+    python bench/fusion_latency.py [--audio-method codebook] [--image-method bovw] [--pictures 3]
 """
 
 from __future__ import annotations
@@ -77,6 +77,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--audio-method", default="codebook")
     parser.add_argument("--image-method", default="bovw")
+    parser.add_argument("--pictures", type=int, default=FusionConfig().pictures_needed)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
@@ -107,7 +108,7 @@ def main() -> None:
             pics = pictures[truth[i]]
             start = (i * 3) % len(pics)
             decision = encounter(
-                policy_class(FusionConfig()), sounds, pics[start:] + pics[:start],
+                policy_class(FusionConfig(pictures_needed=args.pictures)), sounds, pics[start:] + pics[:start],
                 audio.window_seconds,
             )
             if decision is not None and decision.scene is not None:

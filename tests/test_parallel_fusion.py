@@ -12,7 +12,7 @@ def decisions(events):
 
 
 def test_pictures_seen_before_the_sound_confirm_it_at_once():
-    fusion = ParallelFusion(FusionConfig(pictures_needed=2))
+    fusion = ParallelFusion(votes_needed=2)
     assert fusion.wants_picture(0.0)  # looking before anything was heard
     assert decisions(fusion.on_visual("cafe", 60.0, 1.0)) == []
     assert decisions(fusion.on_visual("cafe", 80.0, 3.0)) == []
@@ -24,7 +24,7 @@ def test_pictures_seen_before_the_sound_confirm_it_at_once():
 
 
 def test_a_wrong_sound_is_not_confirmed_by_a_stray_picture():
-    fusion = ParallelFusion(FusionConfig(pictures_needed=2))
+    fusion = ParallelFusion(votes_needed=2)
     fusion.on_acoustic("street", 90.0, 0.0)
     for t, scene in [(1.0, "cafe"), (3.0, "street"), (5.0, "cafe"), (7.0, "street")]:
         # street never leads the vote (1–1, then 1–2, then 2–2): no decision
@@ -32,7 +32,7 @@ def test_a_wrong_sound_is_not_confirmed_by_a_stray_picture():
 
 
 def test_unknown_pictures_do_not_vote_and_unknown_sound_clears_the_opinion():
-    fusion = ParallelFusion(FusionConfig(pictures_needed=2))
+    fusion = ParallelFusion(votes_needed=2)
     fusion.on_visual("cafe", 80.0, 0.0)
     fusion.on_visual(UNKNOWN, 80.0, 2.0)
     fusion.on_acoustic(UNKNOWN, 0.0, 4.0)
@@ -43,8 +43,8 @@ def test_unknown_pictures_do_not_vote_and_unknown_sound_clears_the_opinion():
 
 
 def test_old_pictures_leave_the_window_and_silence_times_out():
-    config = FusionConfig(acoustic_window_s=30.0, confirm_window_s=10.0, pictures_needed=2)
-    fusion = ParallelFusion(config)
+    config = FusionConfig(acoustic_window_s=30.0, confirm_window_s=10.0)
+    fusion = ParallelFusion(config, votes_needed=2)
     fusion.on_visual("cafe", 80.0, 0.0)
     fusion.on_acoustic("cafe", 90.0, 5.0)
     assert decisions(fusion.on_visual("cafe", 80.0, 12.0)) == []  # the t=0 picture is too old
@@ -74,6 +74,8 @@ def test_streaming_parallel_decides_when_the_first_window_ends_sequential_later(
     parallel = stream(ParallelFusion(config), "cafe", visual)
     sequential = stream(POLICIES["sequential"](config), "cafe", visual)
     assert parallel.scene == sequential.scene == "cafe"
-    # pictures at 0, 2, 4 s say cafe, street, cafe; the one at 6 s is the third cafe
-    assert parallel.t == 6.0
+    # pictures at 0, 2, 4 s say cafe, street, cafe: cafe leads with two votes when heard at 5 s
+    assert parallel.t == 5.0
     assert sequential.t > 5.0 + 2 * config.picture_interval_s  # it starts looking only at 5 s
+    three = stream(ParallelFusion(config, votes_needed=3), "cafe", visual)
+    assert three.t == 6.0  # the picture at 6 s is the third cafe
