@@ -106,7 +106,11 @@ def _method_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _audio_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--rate", type=int, default=DEFAULT_RATE, help="model sample rate (Hz)")
+    parser.add_argument(
+        "--rate",
+        type=int,
+        help=f"model sample rate (Hz); default: the method's own ({DEFAULT_RATE} for paper)",
+    )
     parser.add_argument(
         "--window", type=float, default=DEFAULT_WINDOW_SECONDS, help="window length (s)"
     )
@@ -140,7 +144,9 @@ def _library(root: Path, scenes: str | None) -> SceneLibrary:
 
 
 def _audio_params(args: argparse.Namespace) -> dict[str, Any]:
-    return {"rate": args.rate, "window_seconds": args.window}
+    # Each method has its own rate (codebook works at 22,050 Hz, below every recording's band).
+    rate = {} if args.rate is None else {"rate": args.rate}
+    return {**rate, "window_seconds": args.window}
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -151,7 +157,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     if len({r.scene for r in library.recordings}) >= 2:
         audio = make_audio_recogniser(args.audio_method, **_audio_params(args))
         wf = featurize_recordings(
-            library.recordings, audio.featurize, args.rate, args.window, on_error
+            library.recordings, audio.featurize, audio.rate, args.window, on_error
         )
         audio.fit(wf.features, wf.scenes)
         recognisers["acoustic"] = audio

@@ -57,6 +57,7 @@ class BovwVisualRecogniser(CentroidRecogniser):
         n_colour_words: int = 32,
         colour_weight: float = 1.0,
         clusters_per_scene: int = 3,
+        spread_shrinkage: float = 0.0,
         discriminant: bool = True,
         max_codebook_blocks: int = 30000,
         reject_quantile: float = 0.95,
@@ -70,6 +71,7 @@ class BovwVisualRecogniser(CentroidRecogniser):
         self.n_colour_words = n_colour_words
         self.colour_weight = colour_weight
         self.clusters_per_scene = clusters_per_scene
+        self.spread_shrinkage = spread_shrinkage
         self.discriminant = discriminant
         self.max_codebook_blocks = max_codebook_blocks
         self.reject_quantile = reject_quantile
@@ -85,6 +87,7 @@ class BovwVisualRecogniser(CentroidRecogniser):
             "n_colour_words": self.n_colour_words,
             "colour_weight": self.colour_weight,
             "clusters_per_scene": self.clusters_per_scene,
+            "spread_shrinkage": self.spread_shrinkage,
             "discriminant": self.discriminant,
             "max_codebook_blocks": self.max_codebook_blocks,
             "reject_quantile": self.reject_quantile,

@@ -29,6 +29,9 @@ from servant_core.recognisers.base import (
 )
 
 
+MIN_CLUSTER_ROWS = 8
+
+
 @dataclass
 class SceneCentroids:
     """Fitted centroids: `centres` (K, d), `cluster_scene` (K,), `spreads` and `counts` (K,)."""
@@ -49,12 +52,18 @@ class SceneCentroids:
         reject_quantile: float,
         reject_margin: float,
         random_state: int | None,
+        spread_shrinkage: float = 0.0,
     ) -> SceneCentroids:
         """Cluster each scene's rows; calibrate the rejection on the training rows themselves.
 
         `reject_distance` is the `reject_quantile` of the training rows' distances to their own
         centroid, in units of that centroid's spread, times `reject_margin` (training rows sit
         closer to centroids fitted on them than later windows of the same place will).
+
+        `spread_shrinkage` pulls each spread toward the median spread (geometrically; 0 keeps
+        each cluster's own, 1 makes them all equal). A window unlike any training window is far
+        from every centroid; with unshrunk spreads the broadest scene (the one recorded in the
+        most different places) would claim all such windows.
         """
         scenes_arr = np.asarray(scenes)
         names = sorted(set(scenes_arr.tolist()))
@@ -63,13 +72,15 @@ class SceneCentroids:
         assigned = np.empty(len(D), dtype=int)
         for scene in names:
             rows = np.flatnonzero(scenes_arr == scene)
-            k = min(clusters_per_scene, len(rows))
+            # a spread measured on a handful of rows is noise: each cluster gets enough of them
+            k = max(1, min(clusters_per_scene, len(rows) // MIN_CLUSTER_ROWS))
             kmeans = KMeans(n_clusters=k, n_init=3, random_state=random_state).fit(D[rows])
             assigned[rows] = len(centres) + kmeans.labels_
             centres += list(kmeans.cluster_centers_)
             owner += [scene] * k
         centre_arr = np.asarray(centres, dtype=np.float64)
         spreads = cluster_spreads(D, assigned, centre_arr)
+        spreads = spreads ** (1 - spread_shrinkage) * np.median(spreads) ** spread_shrinkage
         counts = np.bincount(assigned, minlength=len(centre_arr)).astype(np.float64)
         own = np.linalg.norm(D - centre_arr[assigned], axis=1) / spreads[assigned]
         reject = float(np.quantile(own, reject_quantile) * reject_margin)
@@ -143,6 +154,7 @@ class CentroidRecogniser:
     sense: ClassVar[str]
 
     clusters_per_scene: int
+    spread_shrinkage: float
     discriminant: bool
     reject_quantile: float
     reject_margin: float
@@ -184,6 +196,7 @@ class CentroidRecogniser:
             self.reject_quantile,
             self.reject_margin,
             self.random_state,
+            self.spread_shrinkage,
         )
         return self
 

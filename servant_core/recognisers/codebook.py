@@ -55,6 +55,7 @@ class CodebookAcousticRecogniser(CentroidRecogniser):
         fmax: float = DEFAULT_FMAX,
         n_codewords: int = 32,
         clusters_per_scene: int = 3,
+        spread_shrinkage: float = 1.0,
         discriminant: bool = False,
         max_codebook_frames: int = 20000,
         reject_quantile: float = 0.95,
@@ -69,6 +70,7 @@ class CodebookAcousticRecogniser(CentroidRecogniser):
         self.fmax = fmax
         self.n_codewords = n_codewords
         self.clusters_per_scene = clusters_per_scene
+        self.spread_shrinkage = spread_shrinkage
         self.discriminant = discriminant
         self.max_codebook_frames = max_codebook_frames
         self.reject_quantile = reject_quantile
@@ -85,6 +87,7 @@ class CodebookAcousticRecogniser(CentroidRecogniser):
             "fmax": self.fmax,
             "n_codewords": self.n_codewords,
             "clusters_per_scene": self.clusters_per_scene,
+            "spread_shrinkage": self.spread_shrinkage,
             "discriminant": self.discriminant,
             "max_codebook_frames": self.max_codebook_frames,
             "reject_quantile": self.reject_quantile,
@@ -109,7 +112,8 @@ class CodebookAcousticRecogniser(CentroidRecogniser):
         )
 
     def _fit_codebooks(self, X: np.ndarray) -> None:
-        shapes = frame_shapes(np.asarray(X, dtype=np.float32)).reshape(-1, X.shape[-1])
+        shapes = frame_shapes(np.asarray(X, dtype=np.float32))
+        shapes = shapes.reshape(-1, shapes.shape[-1])
         self.codebook_ = spherical_kmeans(
             shapes, self.n_codewords, self.max_codebook_frames, self.random_state
         )
