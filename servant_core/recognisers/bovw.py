@@ -19,7 +19,12 @@ from typing import Any, ClassVar
 import numpy as np
 from sklearn.cluster import KMeans
 
-from servant_core.features.descriptors import DEFAULT_BINS, DEFAULT_CELL, DEFAULT_SIZE, dense_descriptors
+from servant_core.features.descriptors import (
+    DEFAULT_BINS,
+    DEFAULT_CELL,
+    DEFAULT_SIZE,
+    dense_descriptors,
+)
 from servant_core.recognisers.centroids import (
     CentroidRecogniser,
     codeword_histograms,

@@ -29,7 +29,6 @@ from servant_core.recognisers.base import (
     scene_probabilities,
 )
 
-
 MIN_CLUSTER_ROWS = 8
 
 
@@ -304,7 +303,9 @@ class CentroidRecogniser:
         model.head_ = SceneCentroids.from_state(header, arrays)
         if model.whitened_novelty:
             model.whitening_ = np.asarray(arrays["whitening"], dtype=np.float64)
-            prefixed = {k[len("novelty_") :]: v for k, v in arrays.items() if k.startswith("novelty_")}
+            prefixed = {
+                k[len("novelty_") :]: v for k, v in arrays.items() if k.startswith("novelty_")
+            }
             model.novelty_head_ = SceneCentroids.from_state(header["novelty"], prefixed)
         model._load_codebook_arrays(arrays)
         return model
