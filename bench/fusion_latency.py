@@ -108,7 +108,9 @@ def main() -> None:
             pics = pictures[truth[i]]
             start = (i * 3) % len(pics)
             decision = encounter(
-                policy_class(FusionConfig(pictures_needed=args.pictures)), sounds, pics[start:] + pics[:start],
+                policy_class(FusionConfig(pictures_needed=args.pictures)),
+                sounds,
+                pics[start:] + pics[:start],
                 audio.window_seconds,
             )
             if decision is not None and decision.scene is not None:

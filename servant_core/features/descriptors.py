@@ -42,9 +42,7 @@ def cell_sums(values: np.ndarray, cell: int) -> np.ndarray:
 
 def blocks(cells: np.ndarray) -> np.ndarray:
     """Every overlapping 2×2 block of an (R, C, d) cell grid: (R-1, C-1, 4d)."""
-    return np.concatenate(
-        [cells[:-1, :-1], cells[:-1, 1:], cells[1:, :-1], cells[1:, 1:]], axis=-1
-    )
+    return np.concatenate([cells[:-1, :-1], cells[:-1, 1:], cells[1:, :-1], cells[1:, 1:]], axis=-1)
 
 
 def dense_descriptors(

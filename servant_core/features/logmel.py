@@ -33,9 +33,7 @@ def mel_to_hz(mel: np.ndarray | float) -> np.ndarray:
 
 
 @lru_cache(maxsize=8)
-def mel_filterbank(
-    rate: int, n_fft: int, n_mels: int, fmin: float, fmax: float
-) -> np.ndarray:
+def mel_filterbank(rate: int, n_fft: int, n_mels: int, fmin: float, fmax: float) -> np.ndarray:
     """(n_mels, n_fft // 2 + 1) triangular filters, equally spaced in mel, each of unit area."""
     if not 0 <= fmin < fmax <= rate / 2:
         raise ValueError(f"mel band {fmin}-{fmax} Hz does not fit below Nyquist ({rate / 2} Hz)")
@@ -75,6 +73,6 @@ def log_mel_frames(
     frames = frame_signal(window, n_fft, hop) * np.hanning(n_fft).astype(np.float32)
     power = np.abs(np.fft.rfft(frames, axis=1)) ** 2
     energies = power @ mel_filterbank(rate, n_fft, n_mels, fmin, fmax).T
-    floor = max(float(energies.max()) * DYNAMIC_RANGE, np.finfo(np.float32).tiny)
+    floor = max(float(energies.max()) * DYNAMIC_RANGE, float(np.finfo(np.float32).tiny))
     log_energies = np.log10(np.maximum(energies, floor))
     return (log_energies - log_energies.mean()).astype(np.float32)

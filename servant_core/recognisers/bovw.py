@@ -19,7 +19,12 @@ from typing import Any, ClassVar
 import numpy as np
 from sklearn.cluster import KMeans
 
-from servant_core.features.descriptors import DEFAULT_BINS, DEFAULT_CELL, DEFAULT_SIZE, dense_descriptors
+from servant_core.features.descriptors import (
+    DEFAULT_BINS,
+    DEFAULT_CELL,
+    DEFAULT_SIZE,
+    dense_descriptors,
+)
 from servant_core.recognisers.centroids import (
     CentroidRecogniser,
     codeword_histograms,
@@ -58,6 +63,7 @@ class BovwVisualRecogniser(CentroidRecogniser):
         colour_weight: float = 1.0,
         clusters_per_scene: int = 3,
         spread_shrinkage: float = 0.0,
+        whitened_novelty: bool = False,
         discriminant: bool = True,
         max_codebook_blocks: int = 30000,
         reject_quantile: float = 0.95,
@@ -73,6 +79,7 @@ class BovwVisualRecogniser(CentroidRecogniser):
         self.clusters_per_scene = clusters_per_scene
         self.spread_shrinkage = spread_shrinkage
         self.discriminant = discriminant
+        self.whitened_novelty = whitened_novelty
         self.max_codebook_blocks = max_codebook_blocks
         self.reject_quantile = reject_quantile
         self.reject_margin = reject_margin
@@ -89,6 +96,7 @@ class BovwVisualRecogniser(CentroidRecogniser):
             "clusters_per_scene": self.clusters_per_scene,
             "spread_shrinkage": self.spread_shrinkage,
             "discriminant": self.discriminant,
+            "whitened_novelty": self.whitened_novelty,
             "max_codebook_blocks": self.max_codebook_blocks,
             "reject_quantile": self.reject_quantile,
             "reject_margin": self.reject_margin,

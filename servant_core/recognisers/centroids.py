@@ -17,6 +17,7 @@ from typing import Any, ClassVar, Self
 
 import numpy as np
 from sklearn.cluster import KMeans
+from sklearn.covariance import LedoitWolf
 from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
 from sklearn.exceptions import NotFittedError
 from sklearn.metrics.pairwise import euclidean_distances
@@ -27,7 +28,6 @@ from servant_core.recognisers.base import (
     cluster_spreads,
     scene_probabilities,
 )
-
 
 MIN_CLUSTER_ROWS = 8
 
@@ -96,10 +96,15 @@ class SceneCentroids:
         """Each row's distance to its nearest centroid, in units of that centroid's spread."""
         return np.min(self.distances(D) / self.spreads[None, :], axis=1)
 
-    def predict(self, D: np.ndarray) -> np.ndarray:
+    def is_unknown(self, D: np.ndarray) -> np.ndarray:
+        return self.nearest_scaled(D) > self.reject_distance
+
+    def predict(self, D: np.ndarray, unknown: np.ndarray | None = None) -> np.ndarray:
+        """The most probable scene of each row, `UNKNOWN` where `unknown` (by default: where
+        the row is too far from every centroid)."""
         probs = self.proba(D)
         names = np.asarray(self.scenes, dtype=object)[np.argmax(probs, axis=1)]
-        names[self.nearest_scaled(D) > self.reject_distance] = UNKNOWN
+        names[self.is_unknown(D) if unknown is None else unknown] = UNKNOWN
         return names.astype(str)
 
     def fold_in(self, D: np.ndarray, scenes: Sequence[str]) -> None:
@@ -156,6 +161,7 @@ class CentroidRecogniser:
     clusters_per_scene: int
     spread_shrinkage: float
     discriminant: bool
+    whitened_novelty: bool
     reject_quantile: float
     reject_margin: float
     random_state: int | None
@@ -189,7 +195,22 @@ class CentroidRecogniser:
             lda = LinearDiscriminantAnalysis(solver="eigen", shrinkage="auto").fit(D, scenes)
             self.projection_ = lda.scalings_[:, : len(lda.classes_) - 1]
             D = self._project(D)
-        self.head_ = SceneCentroids.fit(
+        self.head_ = self._fit_head(D, scenes)
+        if self.whitened_novelty:
+            # "Is this a place I know?" is asked in a space whitened by the spread of windows
+            # within a scene: a new place usually differs along directions in which a known
+            # place hardly varies, where plain distances would not notice it.
+            scenes_arr = np.asarray(scenes)
+            residuals = np.vstack(
+                [D[scenes_arr == s] - D[scenes_arr == s].mean(axis=0) for s in self.head_.scenes]
+            )
+            values, vectors = np.linalg.eigh(LedoitWolf().fit(residuals).covariance_)
+            self.whitening_ = vectors / np.sqrt(np.maximum(values, 1e-12))
+            self.novelty_head_ = self._fit_head(D @ self.whitening_, scenes)
+        return self
+
+    def _fit_head(self, D: np.ndarray, scenes: Sequence[str]) -> SceneCentroids:
+        return SceneCentroids.fit(
             D,
             scenes,
             self.clusters_per_scene,
@@ -198,7 +219,12 @@ class CentroidRecogniser:
             self.random_state,
             self.spread_shrinkage,
         )
-        return self
+
+    def _novelty_head(self, D: np.ndarray) -> tuple[SceneCentroids, np.ndarray]:
+        """The head that decides "unknown", and the rows in its space."""
+        if self.whitened_novelty:
+            return self.novelty_head_, D @ self.whitening_
+        return self.head_, D
 
     @property
     def scenes_(self) -> list[str]:
@@ -225,7 +251,8 @@ class CentroidRecogniser:
 
     def predict(self, X: np.ndarray) -> np.ndarray:
         D = self.descriptors(X)
-        return self.head_.predict(D)
+        head, rows = self._novelty_head(D)
+        return self.head_.predict(D, head.is_unknown(rows))
 
     def predict_proba(self, X: np.ndarray) -> np.ndarray:
         D = self.descriptors(X)
@@ -236,15 +263,19 @@ class CentroidRecogniser:
         return 100.0 * np.max(self.predict_proba(X), axis=1)
 
     def novelty(self, X: np.ndarray) -> np.ndarray:
-        """Distance to the nearest centroid in spreads; above `head_.reject_distance` = unknown."""
-        D = self.descriptors(X)
-        return self.head_.nearest_scaled(D)
+        """Distance to the nearest centroid in its spreads, divided by the rejection distance:
+        above 1 a row is unknown."""
+        head, rows = self._novelty_head(self.descriptors(X))
+        return head.nearest_scaled(rows) / head.reject_distance
 
     def fold_in(self, X: np.ndarray, scenes: Sequence[str]) -> Self:
         """Fold rows with confirmed labels into the model without refitting (codebooks stay)."""
         if len(scenes) != len(X):
             raise ValueError(f"{len(X)} feature rows but {len(scenes)} scene labels")
-        self.head_.fold_in(self.descriptors(X), scenes)
+        D = self.descriptors(X)
+        self.head_.fold_in(D, scenes)
+        if self.whitened_novelty:
+            self.novelty_head_.fold_in(D @ self.whitening_, scenes)
         return self
 
     def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -254,7 +285,13 @@ class CentroidRecogniser:
         if self.discriminant:
             arrays["projection"] = self.projection_
         arrays.update(self._codebook_arrays())
-        return {"params": self.params(), **head}, arrays
+        header = {"params": self.params(), **head}
+        if self.whitened_novelty:
+            novelty, novelty_arrays = self.novelty_head_.state()
+            header["novelty"] = novelty
+            arrays["whitening"] = self.whitening_
+            arrays.update({f"novelty_{k}": v for k, v in novelty_arrays.items()})
+        return header, arrays
 
     @classmethod
     def from_state(cls, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> Self:
@@ -264,6 +301,12 @@ class CentroidRecogniser:
         if model.discriminant:
             model.projection_ = np.asarray(arrays["projection"], dtype=np.float64)
         model.head_ = SceneCentroids.from_state(header, arrays)
+        if model.whitened_novelty:
+            model.whitening_ = np.asarray(arrays["whitening"], dtype=np.float64)
+            prefixed = {
+                k[len("novelty_") :]: v for k, v in arrays.items() if k.startswith("novelty_")
+            }
+            model.novelty_head_ = SceneCentroids.from_state(header["novelty"], prefixed)
         model._load_codebook_arrays(arrays)
         return model
 

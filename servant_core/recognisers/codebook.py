@@ -56,10 +56,11 @@ class CodebookAcousticRecogniser(CentroidRecogniser):
         n_codewords: int = 32,
         clusters_per_scene: int = 3,
         spread_shrinkage: float = 1.0,
+        whitened_novelty: bool = True,
         discriminant: bool = False,
         max_codebook_frames: int = 20000,
         reject_quantile: float = 0.95,
-        reject_margin: float = 1.5,
+        reject_margin: float = 1.7,
         random_state: int | None = 0,
     ) -> None:
         self.rate = rate
@@ -72,6 +73,7 @@ class CodebookAcousticRecogniser(CentroidRecogniser):
         self.clusters_per_scene = clusters_per_scene
         self.spread_shrinkage = spread_shrinkage
         self.discriminant = discriminant
+        self.whitened_novelty = whitened_novelty
         self.max_codebook_frames = max_codebook_frames
         self.reject_quantile = reject_quantile
         self.reject_margin = reject_margin
@@ -89,6 +91,7 @@ class CodebookAcousticRecogniser(CentroidRecogniser):
             "clusters_per_scene": self.clusters_per_scene,
             "spread_shrinkage": self.spread_shrinkage,
             "discriminant": self.discriminant,
+            "whitened_novelty": self.whitened_novelty,
             "max_codebook_frames": self.max_codebook_frames,
             "reject_quantile": self.reject_quantile,
             "reject_margin": self.reject_margin,
