@@ -20,7 +20,6 @@ Without ../shared/data (or $SERVANT_SHARED_DATA) it runs on the demo's synthesis
 from __future__ import annotations
 
 import argparse
-import os
 import resource
 import sys
 import threading
@@ -30,6 +29,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from common import shared_data  # noqa: E402
 
 from servant_core.audio import read_audio  # noqa: E402
 from servant_core.capture.replay import Clip, PacedAudio, PictureReplay  # noqa: E402
@@ -88,16 +89,6 @@ def demo_setup(rate: int = RATE):
             return self.frames[scene][self.count % 8]
 
     return acoustic, visual, clips, SceneCamera(), rate
-
-
-def shared_data() -> Path | None:
-    for candidate in (
-        os.environ.get("SERVANT_SHARED_DATA"),
-        Path(__file__).resolve().parents[2] / "shared" / "data",
-    ):
-        if candidate and Path(candidate, "audio", "dev").is_dir():
-            return Path(candidate)
-    return None
 
 
 def real_setup(data: Path):
@@ -246,7 +237,7 @@ def main() -> int:
     demo_scenes = demo_setup()
     demo = run(demo_scenes, SequentialFusion(FusionConfig(pictures_needed=1)), args.seconds)
     real = None
-    if data is not None:
+    if (data / "audio" / "dev").is_dir():
         print(f"training the paper's recognisers at {RATE} Hz on {', '.join(SCENES)} ...")
         real = run(real_setup(data), SequentialFusion(), args.seconds)
     out = [f"\nengine over {args.seconds:g} s of real-speed replay at {RATE} Hz, no UI"]

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import statistics
 import sys
 import tempfile
@@ -23,6 +22,8 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+
+from common import shared_data  # noqa: E402
 
 from servant_core.evaluate import (  # noqa: E402
     IMAGE_TRAIN_FRACTION,
@@ -37,10 +38,6 @@ from servant_core.recognisers import make_recogniser  # noqa: E402
 
 HORIZON_S = 60.0
 STEP_S = 0.5
-
-
-def shared_data() -> Path:
-    return Path(os.environ.get("SERVANT_SHARED_DATA", REPO.parent / "shared" / "data"))
 
 
 def paired_library(root: Path) -> SceneLibrary:

@@ -15,9 +15,7 @@ import os
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import statistics  # noqa: E402
 import sys  # noqa: E402
-import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import cv2  # noqa: E402
@@ -26,23 +24,11 @@ import numpy as np  # noqa: E402
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from common import median_ms, shared_data  # noqa: E402
+
 from servant_core.library import SceneLibrary, featurize_recordings, read_pictures  # noqa: E402
 from servant_core.recognisers.bovw import BovwVisualRecogniser  # noqa: E402
 from servant_core.recognisers.codebook import CodebookAcousticRecogniser  # noqa: E402
-
-
-def shared_data() -> Path:
-    return Path(os.environ.get("SERVANT_SHARED_DATA", REPO.parent / "shared" / "data"))
-
-
-def median_ms(fn, repeats: int = 30) -> float:
-    fn()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - start) * 1000)
-    return statistics.median(times)
 
 
 def acoustic_cost() -> float:

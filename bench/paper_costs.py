@@ -8,9 +8,7 @@ Run: .venv/bin/python bench/paper_costs.py
 
 from __future__ import annotations
 
-import os
 import resource
-import statistics
 import subprocess
 import sys
 import time
@@ -21,23 +19,11 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from common import median_ms, shared_data  # noqa: E402
+
 from servant_core.features.palette import dominant_colours  # noqa: E402
 from servant_core.library import SceneLibrary, read_picture  # noqa: E402
 from servant_core.recognisers.paper import PaperAcousticRecogniser  # noqa: E402
-
-
-def shared_data() -> Path:
-    return Path(os.environ.get("SERVANT_SHARED_DATA", REPO.parent / "shared" / "data"))
-
-
-def median_ms(fn, repeats: int = 30) -> float:
-    fn()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - start) * 1000)
-    return statistics.median(times)
 
 
 def acoustic_cost() -> float:
