@@ -142,6 +142,7 @@ class Engine:
         self._status: dict[str, DeviceStatus] = {}
         self._reported_errors: set[str] = set()
         self._lock = threading.RLock()  # models, fusion, scores, unknowns
+        self._update_lock = threading.Lock()  # one model update (retrain, fold-in) at a time
         self._camera_lock = threading.Lock()
         self._stop = threading.Event()
         self._finished = threading.Event()
@@ -586,28 +587,31 @@ class Engine:
         running on the old ones meanwhile). Unreadable files are reported and skipped."""
         if not isinstance(library, SceneLibrary):
             library = SceneLibrary.scan(library)
-        with self._lock:
-            acoustic, visual = self.acoustic, self.visual
-        new_acoustic = new_visual = None
-        if acoustic is not None and library.recordings:
-            model = copy.deepcopy(acoustic)
-            windows = featurize_recordings(
-                library.recordings,
-                model.featurize,
-                rate=getattr(model, "rate", DEFAULT_RATE),
-                seconds=self.window_seconds,
-                on_error=lambda e: self._error(str(e)),
-            )
-            new_acoustic = model.fit(windows.features, list(windows.scenes))
-        if visual is not None and library.pictures:
-            model = copy.deepcopy(visual)
-            images, kept = read_pictures(library.pictures, on_error=lambda e: self._error(str(e)))
-            if images:
-                new_visual = model.fit(model.featurize(images), [p.scene for p in kept])
-        with self._lock:
-            self.acoustic = new_acoustic or self.acoustic
-            self.visual = new_visual or self.visual
-            self.retrain_needed = False
+        with self._update_lock:
+            with self._lock:
+                acoustic, visual = self.acoustic, self.visual
+            new_acoustic = new_visual = None
+            if acoustic is not None and library.recordings:
+                model = copy.deepcopy(acoustic)
+                windows = featurize_recordings(
+                    library.recordings,
+                    model.featurize,
+                    rate=getattr(model, "rate", DEFAULT_RATE),
+                    seconds=self.window_seconds,
+                    on_error=lambda e: self._error(str(e)),
+                )
+                new_acoustic = model.fit(windows.features, list(windows.scenes))
+            if visual is not None and library.pictures:
+                model = copy.deepcopy(visual)
+                images, kept = read_pictures(
+                    library.pictures, on_error=lambda e: self._error(str(e))
+                )
+                if images:
+                    new_visual = model.fit(model.featurize(images), [p.scene for p in kept])
+            with self._lock:
+                self.acoustic = new_acoustic or self.acoustic
+                self.visual = new_visual or self.visual
+                self.retrain_needed = False
 
     def _ask_label(self, sense: str, kept: _Kept, scores: dict[str, float], t: float) -> None:
         with self._lock:
@@ -622,8 +626,9 @@ class Engine:
     def label_unknown(self, window_id: str, scene: str) -> Path:
         """Give the scene the user named to an unknown window or picture (from `UnknownScene`).
 
-        It is written into the library (`library_root/<scene>/`, atomically), then folded into the
-        recogniser if it has `fold_in(X, scenes)`; otherwise `retrain_needed` becomes True.
+        It is written into the library (`library_root/<scene>/`, atomically), then folded into a
+        copy of the recogniser that replaces it, if it has `fold_in(X, scenes)`; otherwise
+        `retrain_needed` becomes True. The model is not saved: that is the caller's choice.
         Returns the file written.
         """
         scene = scene.strip()
@@ -644,17 +649,26 @@ class Engine:
             if not ok:
                 raise ServantError(f"{window_id}: the picture could not be encoded as PNG")
             path = atomic_write_bytes(root / scene / f"seen-{stamp}-{window_id}.png", png.tobytes())
-        with self._lock:
-            recogniser = self.acoustic if kept.sense == "audio" else self.visual
-            if recogniser is not None and hasattr(recogniser, "fold_in"):
-                if kept.sense == "audio":
-                    samples = resample(kept.data, kept.rate, getattr(recogniser, "rate", kept.rate))
-                    X = recogniser.featurize(samples[None, :])
-                else:
-                    X = recogniser.featurize([kept.data])
-                recogniser.fold_in(X, [scene])
+        with self._update_lock:
+            with self._lock:
+                recogniser = self.acoustic if kept.sense == "audio" else self.visual
+                if recogniser is None or not hasattr(recogniser, "fold_in"):
+                    self.retrain_needed = True
+                    return path
+            if kept.sense == "audio":
+                samples = resample(kept.data, kept.rate, getattr(recogniser, "rate", kept.rate))
+                X = recogniser.featurize(samples[None, :])
             else:
-                self.retrain_needed = True
+                X = recogniser.featurize([kept.data])
+            # The sense thread may be predicting with this model right now: fold into a copy and
+            # swap it in, as `retrain` does, so that no prediction sees half of an update.
+            model = copy.deepcopy(recogniser)
+            model.fold_in(X, [scene])
+            with self._lock:
+                if kept.sense == "audio":
+                    self.acoustic = model
+                else:
+                    self.visual = model
         return path
 
 

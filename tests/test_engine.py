@@ -8,8 +8,9 @@ import threading
 import cv2
 import numpy as np
 import pytest
+import soundfile as sf
 
-from servant_core.audio import read_audio, write_wav
+from servant_core.audio import cut_windows, read_audio, resample, write_wav
 from servant_core.capture.replay import Clip, PacedAudio, PictureReplay, replay_recordings
 from servant_core.capture.source import ManualClock
 from servant_core.demo.audio_synth import DEMO_RATE
@@ -26,14 +27,16 @@ from servant_core.events import (
     VisualPrediction,
 )
 from servant_core.fusion import FusionConfig, SequentialFusion
-from servant_core.library import SceneLibrary
+from servant_core.library import SceneLibrary, featurize_recordings
+from servant_core.modelfile import load_model, save_model
 from servant_core.recognisers import UNKNOWN
+from servant_core.recognisers.codebook import CodebookAcousticRecogniser
 from servant_core.recognisers.paper import PaperVisualRecogniser
 from servant_core.servo.emulator import start_emulator
 from servant_core.servo.link import ManualClock as LinkClock
 from servant_core.servo.link import ServoLink
 from servant_core.settings import default_joints
-from tests.conftest import tone
+from tests.conftest import link_library, tone
 
 
 @pytest.fixture(scope="module")
@@ -198,6 +201,76 @@ def test_an_unknown_picture_is_asked_about_and_labelled_into_the_library(tmp_pat
         engine.label_unknown(asked[0].window_id, "lavender_room")
     with pytest.raises(ServantError, match="plain folder name"):
         engine.label_unknown(asked[-1].window_id, "../escape")
+
+
+def test_an_unknown_place_heard_labelled_and_folded_in_is_then_recognised(shared_data, tmp_path):
+    """The real open-set path on real recordings: a `codebook` model trained on three places hears
+    a fourth (a supermarket), reports it unknown, is told its name, and recognises it from then on.
+    """
+    root = link_library(
+        tmp_path / "lib",
+        shared_data,
+        {
+            "cafe": (["moodist-cafe.mp3"], 0),
+            "street": (["moodist-busy-street.mp3"], 0),
+            "office": (["moodist-office.mp3"], 0),
+        },
+    )
+    model = CodebookAcousticRecogniser(n_codewords=16)  # 16 words: a quicker fit
+    train = featurize_recordings(SceneLibrary.scan(root).recordings, model.featurize, model.rate)
+    model.fit(train.features, list(train.scenes))
+    rate = 44100  # the microphone's rate, not the model's: the engine resamples every window
+    heard = read_audio(shared_data / "audio/dev/supermarket/moodist-supermarket.mp3", rate)
+    heard = heard[: 90 * rate]
+    clock = ManualClock()
+    engine = Engine(
+        audio=PacedAudio([Clip(None, heard)], rate, realtime=False, clock=clock),
+        acoustic=model,
+        clock=clock,
+        spectrum_fps=0,
+        library_root=root,
+    )
+    events = collect(engine)
+    engine.run_until(21.0)  # four windows
+    asked = [e for e in events if isinstance(e, UnknownScene)]
+    assert asked and asked[0].sense == "audio"
+
+    path = engine.label_unknown(asked[0].window_id, "supermarket")
+    # (a) the window is in the library under its label, whole and readable
+    assert path.parent == root / "supermarket" and path.suffix == ".wav"
+    assert [p.name for p in path.parent.iterdir()] == [path.name]  # no temporary file left
+    saved, saved_rate = sf.read(path, dtype="float32")
+    k = round(asked[0].t / 5.0) - 1  # the window that ended at t
+    assert saved_rate == rate
+    np.testing.assert_allclose(saved, heard[k * 5 * rate : (k + 1) * 5 * rate], atol=1e-4)
+    assert "supermarket" in SceneLibrary.scan(root).scenes
+    # (b) the engine now runs on a copy that knows the place; the model it had is left untouched
+    # (the sense thread may have been predicting with it)
+    assert engine.acoustic is not model
+    assert "supermarket" in engine.acoustic.scenes_ and "supermarket" not in model.scenes_
+
+    engine.run_until(1e9)
+    later = [e for e in events if isinstance(e, AcousticPrediction) and e.t > 21.0]
+    assert len(later) == 14
+    # the same 14 windows as the model had them before the label, each resampled as the engine does
+    windows = np.stack([resample(w, rate, model.rate) for w in cut_windows(heard, rate)[4:]])
+    before = model.predict(model.featurize(windows))
+    named_before = np.mean(before == "supermarket")
+    unknown_before = np.mean(before == UNKNOWN)
+    named_after = np.mean([e.scene == "supermarket" for e in later])
+    unknown_after = np.mean([e.scene is None for e in later])
+    # before: 0 named (the place was not known), 13 of 14 unknown; after: all 14 named
+    assert unknown_before >= 0.5  # the place really was unknown, not taken for another
+    assert named_after >= named_before + 0.7
+    assert unknown_after <= unknown_before - 0.5
+
+    # (c) the folded-in model survives a model file (the engine does not save it by itself)
+    loaded = load_model(save_model(tmp_path / "model.npz", {"acoustic": engine.acoustic}))
+    again = loaded["acoustic"]
+    X = again.featurize(windows[:3])
+    assert again.scenes_ == engine.acoustic.scenes_
+    np.testing.assert_allclose(again.predict_proba(X), engine.acoustic.predict_proba(X))
+    assert list(again.predict(X)) == ["supermarket"] * 3
 
 
 def test_a_detected_scene_moves_the_arm_to_its_pose_only_when_armed(recognisers):
