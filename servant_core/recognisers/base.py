@@ -30,7 +30,12 @@ UNKNOWN = "<unknown>"
 class Recogniser(Protocol):
     method: ClassVar[str]
     sense: ClassVar[str]
-    scenes_: list[str]
+
+    @property
+    def scenes_(self) -> list[str]:
+        """Read-only here: a method may keep it as an attribute or derive it (`CentroidRecogniser`
+        reads it from its centroids, which a fold-in can extend)."""
+        ...
 
     def featurize(self, items: Any) -> np.ndarray: ...
     def fit(self, X: np.ndarray, scenes: Sequence[str] | np.ndarray) -> Self: ...

@@ -47,7 +47,7 @@ class SceneCentroids:
     def fit(
         cls,
         D: np.ndarray,
-        scenes: Sequence[str],
+        scenes: Sequence[str] | np.ndarray,
         clusters_per_scene: int,
         reject_quantile: float,
         reject_margin: float,
@@ -181,7 +181,7 @@ class CentroidRecogniser:
     def _load_codebook_arrays(self, arrays: dict[str, np.ndarray]) -> None:
         raise NotImplementedError
 
-    def fit(self, X: np.ndarray, scenes: Sequence[str]) -> Self:
+    def fit(self, X: np.ndarray, scenes: Sequence[str] | np.ndarray) -> Self:
         check_training_scenes(scenes, len(X))
         self._fit_codebooks(X)
         D = self.describe(X)
@@ -209,7 +209,7 @@ class CentroidRecogniser:
             self.novelty_head_ = self._fit_head(D @ self.whitening_, scenes)
         return self
 
-    def _fit_head(self, D: np.ndarray, scenes: Sequence[str]) -> SceneCentroids:
+    def _fit_head(self, D: np.ndarray, scenes: Sequence[str] | np.ndarray) -> SceneCentroids:
         return SceneCentroids.fit(
             D,
             scenes,
