@@ -55,6 +55,7 @@ from servant_core.events import (
 from servant_core.features.palette import dominant_colours
 from servant_core.fusion import FusionPolicy, SequentialFusion
 from servant_core.library import SceneLibrary, featurize_recordings, read_pictures
+from servant_core.modelfile import save_model
 from servant_core.recognisers import UNKNOWN, Recogniser
 from servant_core.storage import atomic_write_bytes, data_dir
 
@@ -101,6 +102,9 @@ class Engine:
     - `clock`: the engine's time in seconds (default: monotonic seconds since construction).
     - `window_seconds`: the window the acoustic recogniser judges (default: its own, else 5 s).
     - `library_root`: where `label_unknown` writes (default `data_dir()/"library"`).
+    - `model_path`: the model file the recognisers came from. After a retrain or a fold-in the
+      updated recognisers are saved back to it (atomically), so what the user taught survives a
+      restart; None (the demo, or no model) keeps updates in memory only.
 
     Public API used by front ends: `subscribe`, `start`, `stop`, `running`, `join`, `run_until`,
     `status`, `audio_rate`, `record_window`, `take_picture`, `latest_scores`, `retrain`,
@@ -121,6 +125,7 @@ class Engine:
         spectrum_size: int = SPECTRUM_SIZE,
         reopen_seconds: float = 2.0,
         library_root: str | Path | None = None,
+        model_path: str | Path | None = None,
     ) -> None:
         self.audio = audio
         self.camera = camera
@@ -135,6 +140,7 @@ class Engine:
         self.spectrum_size = spectrum_size
         self.reopen_seconds = reopen_seconds
         self.library_root = Path(library_root) if library_root else None
+        self.model_path = Path(model_path) if model_path else None
         self.retrain_needed = False
 
         self._subscribers: list[Subscriber] = []
@@ -612,6 +618,8 @@ class Engine:
                 self.acoustic = new_acoustic or self.acoustic
                 self.visual = new_visual or self.visual
                 self.retrain_needed = False
+            if new_acoustic is not None or new_visual is not None:
+                self._save_models()
 
     def _ask_label(self, sense: str, kept: _Kept, scores: dict[str, float], t: float) -> None:
         with self._lock:
@@ -628,7 +636,7 @@ class Engine:
 
         It is written into the library (`library_root/<scene>/`, atomically), then folded into a
         copy of the recogniser that replaces it, if it has `fold_in(X, scenes)`; otherwise
-        `retrain_needed` becomes True. The model is not saved: that is the caller's choice.
+        `retrain_needed` becomes True. With a `model_path`, the updated model is saved there.
         Returns the file written.
         """
         scene = scene.strip()
@@ -669,7 +677,27 @@ class Engine:
                     self.acoustic = model
                 else:
                     self.visual = model
+            self._save_models()
         return path
+
+    def _save_models(self) -> None:
+        """Write the current recognisers to `model_path` (called under `_update_lock`). A failed
+        write is reported; the file keeps its previous content (atomic replace)."""
+        if self.model_path is None:
+            return
+        with self._lock:
+            models = {
+                role: model
+                for role, model in (("acoustic", self.acoustic), ("visual", self.visual))
+                if model is not None
+            }
+        try:
+            save_model(self.model_path, models)
+        except (OSError, ServantError) as error:
+            self._error(
+                f"{self.model_path}: the updated model could not be saved ({error}); it is used "
+                "until the program ends, and the file keeps the previous model"
+            )
 
 
 def _predict(recogniser: Recogniser, X: np.ndarray) -> tuple[str, float, dict[str, float]]:
@@ -766,4 +794,5 @@ def build_live_engine(
         visual=models.get("visual"),
         fusion=fusion,
         library_root=settings.library_root,
+        model_path=settings.model,
     )

@@ -192,7 +192,11 @@ class ServantApp(App[None]):
     @work(thread=True, group="label", exit_on_error=False)
     def label_unknown(self, window_id: str, scene: str) -> None:
         self.engine.label_unknown(window_id, scene)
-        self.call_from_thread(self.log_line, None, f"labelled the unknown place as {escape(scene)}")
+        saved = getattr(self.engine, "model_path", None)
+        where = f"; model saved to {escape(str(saved))}" if saved else " (kept until you quit)"
+        self.call_from_thread(
+            self.log_line, None, f"labelled the unknown place as {escape(scene)}{where}"
+        )
 
     # -- actions ----------------------------------------------------------------------------------
 

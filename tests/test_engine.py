@@ -113,6 +113,36 @@ def test_retrain_fits_new_models_from_a_library_and_swaps_them_in(library, recog
     assert list(engine.acoustic.predict(engine.acoustic.featurize(fresh))) == list(SCENES)
 
 
+def test_retrain_saves_the_new_models_to_the_engine_model_file(library, recognisers, tmp_path):
+    acoustic, visual = recognisers
+    model_file = save_model(tmp_path / "model.npz", {"acoustic": acoustic, "visual": visual})
+    before = model_file.read_bytes()
+    engine = Engine(acoustic=acoustic, visual=visual, model_path=model_file)
+    engine.retrain(library.root)
+    assert model_file.read_bytes() != before
+    saved = load_model(model_file)
+    fresh = np.stack([synth_window(s, np.random.default_rng([6, i])) for i, s in enumerate(SCENES)])
+    X = engine.acoustic.featurize(fresh)
+    np.testing.assert_allclose(saved["acoustic"].predict_proba(X), engine.acoustic.predict_proba(X))
+    assert set(saved) == {"acoustic", "visual"}
+    assert [p.name for p in tmp_path.iterdir()] == ["model.npz"]  # no temporary file left
+
+
+def test_a_model_file_that_cannot_be_written_is_reported_and_the_new_model_kept(
+    library, recognisers, tmp_path
+):
+    acoustic, visual = recognisers
+    (tmp_path / "not-a-folder").write_text("a file where a folder should be")
+    engine = Engine(
+        acoustic=acoustic, visual=visual, model_path=tmp_path / "not-a-folder" / "model.npz"
+    )
+    events = collect(engine)
+    engine.retrain(library.root)
+    errors = [e.message for e in events if isinstance(e, ErrorEvent)]
+    assert len(errors) == 1 and "could not be saved" in errors[0]
+    assert engine.acoustic is not acoustic  # the retrained model is in use all the same
+
+
 def test_start_and_stop_leave_no_thread_behind(recognisers):
     before = set(threading.enumerate())
     engine = build_demo_engine(seed=1, realtime=False)
@@ -223,12 +253,14 @@ def test_an_unknown_place_heard_labelled_and_folded_in_is_then_recognised(shared
     heard = read_audio(shared_data / "audio/dev/supermarket/moodist-supermarket.mp3", rate)
     heard = heard[: 90 * rate]
     clock = ManualClock()
+    model_file = save_model(tmp_path / "model.npz", {"acoustic": model})
     engine = Engine(
         audio=PacedAudio([Clip(None, heard)], rate, realtime=False, clock=clock),
         acoustic=model,
         clock=clock,
         spectrum_fps=0,
         library_root=root,
+        model_path=model_file,
     )
     events = collect(engine)
     engine.run_until(21.0)  # four windows
@@ -264,9 +296,8 @@ def test_an_unknown_place_heard_labelled_and_folded_in_is_then_recognised(shared
     assert named_after >= named_before + 0.7
     assert unknown_after <= unknown_before - 0.5
 
-    # (c) the folded-in model survives a model file (the engine does not save it by itself)
-    loaded = load_model(save_model(tmp_path / "model.npz", {"acoustic": engine.acoustic}))
-    again = loaded["acoustic"]
+    # (c) the engine saved the folded-in model back to its file: it survives a restart
+    again = load_model(model_file)["acoustic"]
     X = again.featurize(windows[:3])
     assert again.scenes_ == engine.acoustic.scenes_
     np.testing.assert_allclose(again.predict_proba(X), engine.acoustic.predict_proba(X))

@@ -175,10 +175,12 @@ class LibraryScreen(Screen[None]):
     def retrain(self) -> None:
         library = SceneLibrary.scan(self.root)
         self.app.engine.retrain(library)
+        saved = getattr(self.app.engine, "model_path", None)
         self.post_message(
             RetrainDone(
                 f"retrained on {len(library.scenes)} scenes, {len(library.recordings)} "
                 f"recordings, {len(library.pictures)} pictures"
+                + (f"; model saved to {saved}" if saved else "")
             )
         )
 
