@@ -114,6 +114,25 @@ def scores(preds: Predictions, scenes: Sequence[str]) -> dict[str, Any]:
     }
 
 
+def per_recording(
+    preds: Predictions, recording: np.ndarray, names: Sequence[str]
+) -> dict[str, dict[str, Any]]:
+    """Per test recording: its scene, the share of its windows named right, and what its windows
+    were heard as (a whole recording taken for another scene shows here, not in the averages)."""
+    truth, predicted = np.array(preds.truth), np.array(preds.predicted)
+    result = {}
+    for r in np.unique(recording):
+        rows = recording == r
+        heard, counts = np.unique(predicted[rows], return_counts=True)
+        most_first = np.argsort(-counts, kind="stable")
+        result[names[r]] = {
+            "scene": str(truth[rows][0]),
+            "recall": float(np.mean(predicted[rows] == truth[rows])),
+            "heard_as": {str(heard[i]): int(counts[i]) for i in most_first},
+        }
+    return result
+
+
 def featurize_library_audio(
     library: SceneLibrary,
     model: AcousticRecogniser,
@@ -141,11 +160,13 @@ def evaluate_audio(
     probe = make_audio_recogniser(method, **params)
     wf = featurize_library_audio(library, probe, on_error)
     preds = Predictions([], [], [])
+    tested: list[np.ndarray] = []  # the recording of each test window, in prediction order
     skipped: list[str] = []
     if protocol == "temporal":
         train = temporal_split(wf.recording, wf.position)
         model = make_audio_recogniser(method, **params).fit(wf.features[train], wf.scenes[train])
         preds.extend(model, wf.features[~train], wf.scenes[~train])
+        tested.append(wf.recording[~train])
         n_train = int(train.sum())
     else:
         n_train = 0
@@ -159,8 +180,14 @@ def evaluate_audio(
                 skipped.append(f"{wf.recordings[r].path.name}: {error}")
                 continue
             preds.extend(model, wf.features[test], wf.scenes[test])
+            tested.append(wf.recording[test])
             n_train += int((~test).sum())
     result = scores(preds, sorted(set(wf.scenes.tolist())))
+    result["per_recording"] = per_recording(
+        preds,
+        np.concatenate(tested),
+        [str(r.path.relative_to(library.root)) for r in wf.recordings],
+    )
     result.update(
         method=method,
         protocol=protocol,

@@ -52,6 +52,22 @@ def test_eval_audio_both_protocols_end_to_end(small_library, capsys):
     # one recording per scene: each left-out scene is absent from its training set
     assert recording["n_test"] == 11 + 7 + 12
     assert recording["accuracy"] == 0.0
+    # per recording: which scene each left-out recording was heard as, window by window
+    per = temporal["per_recording"]
+    assert set(per) == {
+        "cafe/moodist-crowded-bar.mp3",
+        "street/moodist-traffic.mp3",
+        "vehicle/moodist-airplane.mp3",
+    }
+    assert sum(sum(r["heard_as"].values()) for r in per.values()) == temporal["n_test"]
+    for r in per.values():
+        assert r["recall"] == r["heard_as"].get(r["scene"], 0) / sum(r["heard_as"].values())
+    assert [r["scene"] for r in recording["per_recording"].values()] == [
+        "cafe",
+        "street",
+        "vehicle",
+    ]
+    assert all(r["recall"] == 0.0 for r in recording["per_recording"].values())
 
 
 def test_eval_image_by_file_order(small_library, capsys):

@@ -270,6 +270,13 @@ def _format_scores(result: dict[str, Any]) -> str:
         "recall per scene:",
     ]
     lines += [f"  {scene:<14} {recall:.3f}" for scene, recall in result["per_class"].items()]
+    if "per_recording" in result:
+        lines.append("recall per recording (heard as):")
+        lines += [
+            f"  {name:<40} {r['recall']:.3f}  "
+            + ", ".join(f"{scene} {n}" for scene, n in r["heard_as"].items())
+            for name, r in result["per_recording"].items()
+        ]
     lines += [f"skipped fold: {s}" for s in result.get("skipped_folds", [])]
     return "\n".join(lines)
 
