@@ -56,7 +56,7 @@ from servant_core.features.palette import dominant_colours
 from servant_core.fusion import FusionPolicy, SequentialFusion
 from servant_core.library import SceneLibrary, featurize_recordings, read_pictures
 from servant_core.modelfile import save_model
-from servant_core.recognisers import UNKNOWN, Recogniser
+from servant_core.recognisers import UNKNOWN, Recogniser, make_recogniser
 from servant_core.storage import atomic_write_bytes, data_dir
 
 log = logging.getLogger(__name__)
@@ -102,6 +102,8 @@ class Engine:
     - `clock`: the engine's time in seconds (default: monotonic seconds since construction).
     - `window_seconds`: the window the acoustic recogniser judges (default: its own, else 5 s).
     - `library_root`: where `label_unknown` writes (default `data_dir()/"library"`).
+    - `fresh_methods`: the (acoustic, visual) methods a retrain fits for a sense that has no
+      recogniser yet (a first start, before anything was taught).
     - `model_path`: the model file the recognisers came from. After a retrain or a fold-in the
       updated recognisers are saved back to it (atomically), so what the user taught survives a
       restart; None (the demo, or no model) keeps updates in memory only.
@@ -126,6 +128,7 @@ class Engine:
         reopen_seconds: float = 2.0,
         library_root: str | Path | None = None,
         model_path: str | Path | None = None,
+        fresh_methods: tuple[str, str] = ("codebook", "bovw"),
     ) -> None:
         self.audio = audio
         self.camera = camera
@@ -141,6 +144,7 @@ class Engine:
         self.reopen_seconds = reopen_seconds
         self.library_root = Path(library_root) if library_root else None
         self.model_path = Path(model_path) if model_path else None
+        self.fresh_methods = fresh_methods
         self.retrain_needed = False
 
         self._subscribers: list[Subscriber] = []
@@ -590,15 +594,16 @@ class Engine:
 
     def retrain(self, library: SceneLibrary | str | Path) -> None:
         """Refit copies of both recognisers on a scene library, then swap them in (the senses keep
-        running on the old ones meanwhile). Unreadable files are reported and skipped."""
+        running on the old ones meanwhile). A sense without a recogniser gets a new one of its
+        `fresh_methods` method. Unreadable files are reported and skipped."""
         if not isinstance(library, SceneLibrary):
             library = SceneLibrary.scan(library)
         with self._update_lock:
             with self._lock:
                 acoustic, visual = self.acoustic, self.visual
             new_acoustic = new_visual = None
-            if acoustic is not None and library.recordings:
-                model = copy.deepcopy(acoustic)
+            if library.recordings:
+                model = self._copy_or_fresh(acoustic, "audio")
                 windows = featurize_recordings(
                     library.recordings,
                     model.featurize,
@@ -607,8 +612,8 @@ class Engine:
                     on_error=lambda e: self._error(str(e)),
                 )
                 new_acoustic = model.fit(windows.features, list(windows.scenes))
-            if visual is not None and library.pictures:
-                model = copy.deepcopy(visual)
+            if library.pictures:
+                model = self._copy_or_fresh(visual, "image")
                 images, kept = read_pictures(
                     library.pictures, on_error=lambda e: self._error(str(e))
                 )
@@ -620,6 +625,11 @@ class Engine:
                 self.retrain_needed = False
             if new_acoustic is not None or new_visual is not None:
                 self._save_models()
+
+    def _copy_or_fresh(self, recogniser: Recogniser | None, sense: str) -> Any:
+        if recogniser is not None:
+            return copy.deepcopy(recogniser)
+        return make_recogniser(sense, self.fresh_methods[0 if sense == "audio" else 1])
 
     def _ask_label(self, sense: str, kept: _Kept, scores: dict[str, float], t: float) -> None:
         with self._lock:
@@ -764,11 +774,13 @@ class LiveSettings:
     """What `build_live_engine` needs; every field has a sensible default.
 
     `model`: a model file from `servant train` (None: no recognisers, senses only).
+    `model_path`: where retrains and fold-ins are saved (None: back to `model`).
     `microphone`: device index or name (None: the default input); `rate`: None for its default.
     `camera`: index, video file or image-sequence pattern (None: no camera).
     """
 
     model: str | Path | None = None
+    model_path: str | Path | None = None
     microphone: int | str | None = None
     rate: int | None = None
     use_microphone: bool = True
@@ -794,5 +806,5 @@ def build_live_engine(
         visual=models.get("visual"),
         fusion=fusion,
         library_root=settings.library_root,
-        model_path=settings.model,
+        model_path=settings.model_path or settings.model,
     )

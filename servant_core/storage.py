@@ -23,6 +23,11 @@ def data_dir() -> Path:
     return Path(override) if override else Path(platformdirs.user_data_dir(APP_NAME))
 
 
+def default_model_file() -> Path:
+    """The model `servant` alone starts with, and where teach mode's retrains are saved."""
+    return data_dir() / "model.npz"
+
+
 def config_dir() -> Path:
     """The user's configuration directory (settings); `SERVANT_CONFIG_DIR` overrides it."""
     override = os.environ.get("SERVANT_CONFIG_DIR")

@@ -14,7 +14,8 @@ from typing import Any
 
 from servant_core.cli import build_parser as build_core_parser
 from servant_core.cli import run_handler
-from servant_core.engine import LiveSettings, build_demo_engine, build_live_engine
+from servant_core.cli.live import live_settings
+from servant_core.engine import build_demo_engine, build_live_engine
 from servant_core.errors import ServantError
 
 
@@ -34,23 +35,6 @@ def run_tui(engine_factory: Callable[[], Any], mode: str) -> int:
     app = ServantApp(engine, mode=mode)
     app.run()
     return app.return_code or 0
-
-
-def live_settings(args: argparse.Namespace | None) -> LiveSettings:
-    """`servant run`'s options; `servant` alone takes the devices chosen in Settings."""
-    if args is None:
-        from servant_core.settings import load_settings
-
-        chosen = load_settings()
-        camera = chosen.camera if chosen.camera is not None else 0
-        return LiveSettings(microphone=chosen.audio_device, camera=camera)
-    return LiveSettings(
-        model=args.model,
-        microphone=args.mic,
-        rate=args.rate,
-        use_microphone=not args.no_mic,
-        camera=None if args.no_camera else args.camera,
-    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:

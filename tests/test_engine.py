@@ -13,6 +13,8 @@ import soundfile as sf
 from servant_core.audio import cut_windows, read_audio, resample, write_wav
 from servant_core.capture.replay import Clip, PacedAudio, PictureReplay, replay_recordings
 from servant_core.capture.source import ManualClock
+from servant_core.cli import build_parser
+from servant_core.cli.live import live_settings
 from servant_core.demo.audio_synth import DEMO_RATE
 from servant_core.demo.scenes import SCENES, synth_picture, synth_window, train_demo_recognisers
 from servant_core.engine import Engine, build_demo_engine, spectrum_db
@@ -36,6 +38,7 @@ from servant_core.servo.emulator import start_emulator
 from servant_core.servo.link import ManualClock as LinkClock
 from servant_core.servo.link import ServoLink
 from servant_core.settings import default_joints
+from servant_core.storage import default_model_file
 from tests.conftest import link_library, tone
 
 
@@ -141,6 +144,42 @@ def test_a_model_file_that_cannot_be_written_is_reported_and_the_new_model_kept(
     errors = [e.message for e in events if isinstance(e, ErrorEvent)]
     assert len(errors) == 1 and "could not be saved" in errors[0]
     assert engine.acoustic is not acoustic  # the retrained model is in use all the same
+
+
+def test_a_first_retrain_without_recognisers_fits_fresh_ones_and_saves_them(library, tmp_path):
+    """`servant` on a first start has no model: teach mode's retrain must still give it one."""
+    model_file = tmp_path / "model.npz"
+    engine = Engine(model_path=model_file)
+    engine.retrain(library.root)
+    assert engine.acoustic.method == "codebook" and engine.visual.method == "bovw"
+    assert engine.acoustic.scenes_ == engine.visual.scenes_ == sorted(SCENES)
+    saved = load_model(model_file)
+    assert {role: m.method for role, m in saved.items()} == {
+        "acoustic": "codebook",
+        "visual": "bovw",
+    }
+    acoustic = saved["acoustic"]
+    fresh = np.stack(
+        [
+            resample(synth_window(s, np.random.default_rng([8, i])), DEMO_RATE, acoustic.rate)
+            for i, s in enumerate(SCENES)
+        ]
+    )
+    heard = acoustic.predict(acoustic.featurize(fresh))
+    assert list(heard) == list(SCENES)
+
+
+def test_servant_alone_and_run_load_and_save_the_model_teach_mode_saved(recognisers):
+    parser = build_parser()
+    default = default_model_file()
+    first = live_settings(parser.parse_args(["run"]))
+    assert first.model is None and first.model_path == default  # nothing taught yet
+    assert live_settings(None).model is None and live_settings(None).model_path == default
+    save_model(default, {"acoustic": recognisers[0]})
+    assert live_settings(parser.parse_args(["run"])).model == default
+    assert live_settings(None).model == default
+    given = live_settings(parser.parse_args(["run", "--model", "mine.npz"]))
+    assert given.model == given.model_path == "mine.npz"
 
 
 def test_start_and_stop_leave_no_thread_behind(recognisers):

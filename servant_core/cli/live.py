@@ -27,13 +27,18 @@ from servant_core.events import (
     UnknownScene,
     VisualPrediction,
 )
+from servant_core.storage import default_model_file
 
 
 def register(subparsers: Any) -> None:
     run = subparsers.add_parser(
         "run", help="recognise scenes from the live microphone and camera", description=__doc__
     )
-    run.add_argument("--model", help="model file from `servant train` (default: senses only)")
+    run.add_argument(
+        "--model",
+        help="model file from `servant train`; retrains are saved back to it (default: the one "
+        "teach mode saved in the data dir, if any, else senses only)",
+    )
     run.add_argument("--mic", help="input device index or name (default: the system's default)")
     run.add_argument("--rate", type=int, help="sample rate in Hz (default: the device's own)")
     run.add_argument("--no-mic", action="store_true", help="do not listen")
@@ -71,14 +76,34 @@ def run_live(args: argparse.Namespace) -> int:
             rate = f"{device.channels} ch, {device.default_rate} Hz"
             print(f"{mark} {device.index:3d}  {device.name}  ({rate})")
         return 0
-    settings = LiveSettings(
-        model=args.model,
+    return _run(build_live_engine(live_settings(args)), args)
+
+
+def live_settings(args: argparse.Namespace | None = None) -> LiveSettings:
+    """`servant run`'s options; None (`servant` alone): the devices chosen in Settings.
+
+    Without `--model`, the model that teach mode and the library screen last saved is loaded
+    (`default_model_file()`, if there is one yet) and retrains and fold-ins are saved back to it.
+    """
+    default = default_model_file()
+    if args is None:
+        from servant_core.settings import load_settings
+
+        chosen = load_settings()
+        return LiveSettings(
+            model=default if default.is_file() else None,
+            model_path=default,
+            microphone=chosen.audio_device,
+            camera=chosen.camera if chosen.camera is not None else 0,
+        )
+    return LiveSettings(
+        model=args.model or (default if default.is_file() else None),
+        model_path=args.model or default,
         microphone=args.mic,
         rate=args.rate,
         use_microphone=not args.no_mic,
         camera=None if args.no_camera else args.camera,
     )
-    return _run(build_live_engine(settings), args)
 
 
 def run_demo(args: argparse.Namespace) -> int:
