@@ -14,6 +14,7 @@ from textual.screen import Screen
 from textual.worker import Worker, WorkerState
 
 from servant_core.errors import ServantError
+from servant_core.event_text import place
 from servant_core.events import (
     AcousticPrediction,
     ArmState,
@@ -142,9 +143,9 @@ class ServantApp(App[None]):
                 return f"[bold green]{escape(event.line)}[/] ({event.confidence:.1f} %)"
             return f"[yellow]{escape(event.line)}[/]"
         if isinstance(event, AcousticPrediction):
-            return f"hears {escape(event.scene or 'an unknown place')} ({event.confidence:.1f} %)"
+            return f"hears {escape(place(event.scene))} ({event.confidence:.1f} %)"
         if isinstance(event, VisualPrediction):
-            return f"sees {escape(event.scene or 'an unknown place')} ({event.confidence:.1f} %)"
+            return f"sees {escape(place(event.scene))} ({event.confidence:.1f} %)"
         if isinstance(event, UnknownScene):
             nearest = f", nearest {escape(event.nearest_scene)}" if event.nearest_scene else ""
             return f"[magenta]unknown place ({event.sense}{nearest}): asking for a label[/]"
