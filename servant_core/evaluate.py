@@ -240,6 +240,64 @@ def evaluate_image(
     return result
 
 
+def _paired_scenes(
+    library: SceneLibrary, test_library: SceneLibrary | None, needs: str
+) -> list[str]:
+    """The sorted scenes with both recordings and pictures in `library` (and in `test_library`,
+    if given); at least two, or a ServantError that says what `needs` them."""
+    paired = sorted({r.scene for r in library.recordings} & {p.scene for p in library.pictures})
+    if test_library is not None:
+        paired = [
+            s
+            for s in paired
+            if any(r.scene == s for r in test_library.recordings)
+            and any(p.scene == s for p in test_library.pictures)
+        ]
+    if len(paired) < 2:
+        raise ServantError(
+            f"{library.root}: {needs} at least two scenes with both recordings and pictures"
+        )
+    return paired
+
+
+@dataclass
+class PairedFit:
+    """Both recognisers fitted on one library, and what they were fitted on."""
+
+    audio: AcousticRecogniser
+    windows: WindowFeatures
+    window_train: np.ndarray  # which of `windows` trained `audio`
+    visual: Recogniser
+    picture_features: np.ndarray  # rows of `pictures`
+    pictures: list[Picture]  # the readable pictures
+    picture_train: np.ndarray  # which of `pictures` trained `visual`
+
+
+def _fit_paired(
+    library: SceneLibrary,
+    acoustic_method: str,
+    visual_method: str,
+    on_error: Callable[[ServantError], None] | None,
+    train_on_all: bool = False,
+) -> PairedFit:
+    """The acoustic recogniser trained on the temporal split of the library's windows, the visual
+    one on the file-order split of its pictures; on all of both with `train_on_all` (when the
+    test items come from another library)."""
+    audio = make_audio_recogniser(acoustic_method)
+    wf = featurize_library_audio(library, audio, on_error)
+    train = (
+        np.ones(len(wf.scenes), bool) if train_on_all else temporal_split(wf.recording, wf.position)
+    )
+    audio.fit(wf.features[train], wf.scenes[train])
+    visual = make_recogniser("image", visual_method)
+    X, kept = _pictures_and_features(visual, library.pictures, on_error)
+    p_train = (
+        np.ones(len(kept), bool) if train_on_all else file_order_split(kept, IMAGE_TRAIN_FRACTION)
+    )
+    visual.fit(X[p_train], [p.scene for p, t in zip(kept, p_train, strict=True) if t])
+    return PairedFit(audio, wf, train, visual, X, kept, p_train)
+
+
 def run_fusion(
     policy_name: str,
     config: FusionConfig,
@@ -286,26 +344,16 @@ def evaluate_fusion(
             f"unknown fusion policy {policy!r}; choose {', '.join(sorted(POLICIES))}"
         )
     config = config or FusionConfig()
-    paired = sorted({r.scene for r in library.recordings} & {p.scene for p in library.pictures})
-    if len(paired) < 2:
-        raise ServantError(
-            f"{library.root}: fusion needs at least two scenes with both recordings and pictures"
-        )
-    library = library.restricted(paired)
-    audio = make_audio_recogniser(acoustic_method)
-    wf = featurize_library_audio(library, audio, on_error)
-    train = temporal_split(wf.recording, wf.position)
-    audio.fit(wf.features[train], wf.scenes[train])
-    a_scene = audio.predict(wf.features[~train])
-    a_conf = audio.confidence(wf.features[~train])
+    paired = _paired_scenes(library, None, "fusion needs")
+    fitted = _fit_paired(library.restricted(paired), acoustic_method, visual_method, on_error)
+    wf, train = fitted.windows, fitted.window_train
+    a_scene = fitted.audio.predict(wf.features[~train])
+    a_conf = fitted.audio.confidence(wf.features[~train])
 
-    visual = make_recogniser("image", visual_method)
-    X, kept = _pictures_and_features(visual, library.pictures, on_error)
-    p_train = file_order_split(kept, IMAGE_TRAIN_FRACTION)
-    visual.fit(X[p_train], [p.scene for p, t in zip(kept, p_train, strict=True) if t])
-    test_pics = [i for i, t in enumerate(p_train) if not t]
-    v_scene = visual.predict(X[test_pics])
-    v_conf = visual.confidence(X[test_pics])
+    X, kept = fitted.picture_features, fitted.pictures
+    test_pics = [i for i, t in enumerate(fitted.picture_train) if not t]
+    v_scene = fitted.visual.predict(X[test_pics])
+    v_conf = fitted.visual.confidence(X[test_pics])
     by_scene: dict[str, list[tuple[str, float]]] = {}
     for k, i in enumerate(test_pics):
         by_scene.setdefault(kept[i].scene, []).append((str(v_scene[k]), float(v_conf[k])))
@@ -379,35 +427,12 @@ def paper_tables(
     """The paper's Table I (terminal line per picture × recording) and Table II (average
     confidence per cell, 0.000 where no scene), for every scene with recordings and pictures."""
     config = config or FusionConfig()
-    paired = sorted({r.scene for r in library.recordings} & {p.scene for p in library.pictures})
-    if test_library is not None:
-        paired = [
-            s
-            for s in paired
-            if any(r.scene == s for r in test_library.recordings)
-            and any(p.scene == s for p in test_library.pictures)
-        ]
-    if len(paired) < 2:
-        raise ServantError(
-            f"{library.root}: the tables need at least two scenes with both recordings and pictures"
-        )
+    paired = _paired_scenes(library, test_library, "the tables need")
     library = library.restricted(paired)
-    audio = make_audio_recogniser(acoustic_method)
-    wf = featurize_library_audio(library, audio, on_error)
-    train = (
-        temporal_split(wf.recording, wf.position)
-        if test_library is None
-        else np.ones(len(wf.scenes), bool)
+    fitted = _fit_paired(
+        library, acoustic_method, visual_method, on_error, train_on_all=test_library is not None
     )
-    audio.fit(wf.features[train], wf.scenes[train])
-    visual = make_recogniser("image", visual_method)
-    X, kept = _pictures_and_features(visual, library.pictures, on_error)
-    p_train = (
-        file_order_split(kept, IMAGE_TRAIN_FRACTION)
-        if test_library is None
-        else np.ones(len(kept), bool)
-    )
-    visual.fit(X[p_train], [p.scene for p, t in zip(kept, p_train, strict=True) if t])
+    audio, visual = fitted.audio, fitted.visual
 
     windows, pictures = _first_test_items(
         library,

@@ -37,6 +37,8 @@ class AcousticPrediction:
     scene: str | None  # None: unknown place (open set)
     confidence: float  # the paper's eq. 1 in paper mode, else a probability in percent
     scores: dict[str, float] = field(default_factory=dict)  # per scene, sums to 1 when calibrated
+    # The recogniser's `confidence_unit`: "%", or "eq. 1" in paper mode; None: not said.
+    confidence_unit: str | None = None
 
 
 @dataclass(frozen=True)
@@ -45,6 +47,8 @@ class VisualPrediction:
     scene: str | None
     confidence: float  # the paper's eq. 2 in paper mode, else a probability in percent
     scores: dict[str, float] = field(default_factory=dict)
+    # The recogniser's `confidence_unit`: "%", or "eq. 2" in paper mode; None: not said.
+    confidence_unit: str | None = None
 
 
 @dataclass(frozen=True)

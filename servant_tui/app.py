@@ -14,6 +14,7 @@ from textual.screen import Screen
 from textual.worker import Worker, WorkerState
 
 from servant_core.errors import ServantError
+from servant_core.event_text import average_unit, confidence_text, place
 from servant_core.events import (
     AcousticPrediction,
     ArmState,
@@ -75,6 +76,8 @@ class ServantApp(App[None]):
         self.settings = settings
         self.arm_state: ArmState | None = None
         self.known_scenes: set[str] = set()
+        # the latest prediction of each sense: a decision's confidence is their average
+        self.predictions: dict[type, AcousticPrediction | VisualPrediction] = {}
         self.live = LiveScreen()
         self._prompt_open = False
         engine.subscribe(self._from_engine)
@@ -118,8 +121,10 @@ class ServantApp(App[None]):
             if changed:
                 self.refresh_bindings()
                 self.log_line(event.t, self._arm_line(event))
-        elif isinstance(event, (AcousticPrediction, VisualPrediction)) and event.scene:
-            self.known_scenes.add(event.scene)
+        elif isinstance(event, (AcousticPrediction, VisualPrediction)):
+            self.predictions[type(event)] = event
+            if event.scene:
+                self.known_scenes.add(event.scene)
         line = self._log_text(event)
         if line:
             self.log_line(event.t, line)
@@ -135,16 +140,17 @@ class ServantApp(App[None]):
     def _event_screens(self) -> Iterable[Any]:
         return [s for s in self.screen_stack if hasattr(s, "show_event")]
 
-    @staticmethod
-    def _log_text(event: Any) -> str | None:
+    def _log_text(self, event: Any) -> str | None:
         if isinstance(event, Decision):
             if event.scene:
-                return f"[bold green]{escape(event.line)}[/] ({event.confidence:.1f} %)"
+                unit = average_unit(*self.predictions.values())
+                confidence = confidence_text(event.confidence, unit)
+                return f"[bold green]{escape(event.line)}[/] ({confidence})"
             return f"[yellow]{escape(event.line)}[/]"
-        if isinstance(event, AcousticPrediction):
-            return f"hears {escape(event.scene or 'an unknown place')} ({event.confidence:.1f} %)"
-        if isinstance(event, VisualPrediction):
-            return f"sees {escape(event.scene or 'an unknown place')} ({event.confidence:.1f} %)"
+        if isinstance(event, (AcousticPrediction, VisualPrediction)):
+            verb = "hears" if isinstance(event, AcousticPrediction) else "sees"
+            confidence = confidence_text(event.confidence, event.confidence_unit)
+            return f"{verb} {escape(place(event.scene))} ({confidence})"
         if isinstance(event, UnknownScene):
             nearest = f", nearest {escape(event.nearest_scene)}" if event.nearest_scene else ""
             return f"[magenta]unknown place ({event.sense}{nearest}): asking for a label[/]"

@@ -48,20 +48,21 @@ COFFEE_TRAINED = np.array(
 
 
 def demo_script() -> list[Any]:
-    """A short afternoon: no scene at first, then a coffee shop confirmed by two pictures."""
+    """A short afternoon: no scene at first, then a coffee shop confirmed by two pictures; the
+    recognisers give probabilities in percent (as `codebook` and `bovw` do)."""
     return [
         DeviceStatus(0.0, "microphone", True, "demo synth 44.1 kHz"),
         DeviceStatus(0.0, "camera", True, "demo frames"),
         DeviceStatus(0.0, "servo", True, "emulator on /dev/pts/3"),
         ArmState(0.0, True, False, "maestro", "/dev/pts/3", dict(JOINTS)),
-        AcousticPrediction(5.0, "GymScene", 61.4, {"GymScene": 0.6, "CoffeeScene": 0.4}),
+        AcousticPrediction(5.0, "GymScene", 61.4, {"GymScene": 0.6, "CoffeeScene": 0.4}, "%"),
         FusionState(5.0, "looking", "GymScene", 30.0, 0),
         FusionState(35.0, "listening", None, None, 0),
         Decision(35.0, None, 0.0, "No scene detected"),
-        AcousticPrediction(40.0, "CoffeeScene", 91.2, {"CoffeeScene": 0.9, "GymScene": 0.1}),
+        AcousticPrediction(40.0, "CoffeeScene", 91.2, {"CoffeeScene": 0.9, "GymScene": 0.1}, "%"),
         FusionState(40.0, "looking", "CoffeeScene", 30.0, 0),
         Palette(44.0, COFFEE, np.array([0.41, 0.27, 0.2, 0.12]), "CoffeeScene", COFFEE_TRAINED),
-        VisualPrediction(44.0, "CoffeeScene", 83.8, {"CoffeeScene": 0.8}),
+        VisualPrediction(44.0, "CoffeeScene", 83.8, {"CoffeeScene": 0.8}, "%"),
         FusionState(44.0, "confirming", "CoffeeScene", 26.0, 1),
         FusionState(48.0, "confirming", "CoffeeScene", 22.0, 2),
         Decision(48.0, "CoffeeScene", 87.5, "CoffeeScene detected", 91.2, 83.8),
@@ -74,7 +75,7 @@ def demo_script() -> list[Any]:
             dict(JOINTS),
             {"shoulder": 30.0, "elbow": 100.0, "wrist": 90.0},
         ),
-        AcousticPrediction(53.0, "CoffeeScene", 88.0, {"CoffeeScene": 0.85}),
+        AcousticPrediction(53.0, "CoffeeScene", 88.0, {"CoffeeScene": 0.85}, "%"),
         FusionState(53.0, "looking", "CoffeeScene", 30.0, 0),
         FusionState(60.5, "looking", "CoffeeScene", 22.5, 1),
         spectrum_frame(60.5),

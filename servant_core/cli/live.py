@@ -17,6 +17,7 @@ import time
 from typing import Any
 
 from servant_core.engine import Engine, LiveSettings, build_demo_engine, build_live_engine
+from servant_core.event_text import confidence_text, place
 from servant_core.events import (
     AcousticPrediction,
     ArmState,
@@ -145,11 +146,11 @@ def _event_line(event: Event) -> str | None:
     if isinstance(event, Decision):
         return f"{at} {event.line}  confidence {event.confidence:.3f}"
     if isinstance(event, AcousticPrediction):
-        scene = event.scene or "an unknown place"
-        return f"{at} heard {scene}  acoustic confidence {event.confidence:.1f}"
+        confidence = confidence_text(event.confidence, event.confidence_unit)
+        return f"{at} heard {place(event.scene)}  acoustic confidence {confidence}"
     if isinstance(event, VisualPrediction):
-        scene = event.scene or "an unknown place"
-        return f"{at} saw {scene}  visual confidence {event.confidence:.1f}"
+        confidence = confidence_text(event.confidence, event.confidence_unit)
+        return f"{at} saw {place(event.scene)}  visual confidence {confidence}"
     if isinstance(event, UnknownScene):
         return f"{at} unknown {event.sense} ({event.window_id}), nearest: {event.nearest_scene}"
     if isinstance(event, DeviceStatus):

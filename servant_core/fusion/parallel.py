@@ -16,11 +16,11 @@ from __future__ import annotations
 from collections import Counter
 
 from servant_core.events import Decision, FusionState
-from servant_core.fusion.sequential import NO_SCENE, FusionConfig, scene_line
+from servant_core.fusion.sequential import AcousticWindow, FusionConfig, scene_line
 from servant_core.recognisers.base import UNKNOWN
 
 
-class ParallelFusion:
+class ParallelFusion(AcousticWindow):
     def __init__(
         self,
         config: FusionConfig | None = None,
@@ -61,10 +61,7 @@ class ParallelFusion:
         return "confirming" if any(s == self.scene for _, s, _ in self.pictures) else "looking"
 
     def state(self, t: float) -> FusionState:
-        left = None
-        if self.opened_at is not None:
-            left = max(0.0, self.opened_at + self.config.acoustic_window_s - t)
-        return FusionState(t, self.phase, self.scene, left, len(self._recent(t)))
+        return FusionState(t, self.phase, self.scene, self.seconds_left(t), len(self._recent(t)))
 
     def _decide(self, t: float) -> list[Decision | FusionState]:
         agreeing = self._agreeing(t)
@@ -84,13 +81,10 @@ class ParallelFusion:
         return [decision, self.state(t)]
 
     def tick(self, t: float) -> list[Decision | FusionState]:
-        """Give up on the current opinion once `acoustic_window_s` has passed without agreement."""
+        """Forget pictures older than `confirm_window_s`; give up on the current opinion once
+        `acoustic_window_s` has passed without agreement."""
         self.pictures = self._recent(t)
-        if self.opened_at is None or t - self.opened_at <= self.config.acoustic_window_s:
-            return []
-        decision = Decision(t, None, 0.0, NO_SCENE, self.acoustic_confidence, 0.0)
-        self._restart()
-        return [decision, self.state(t)]
+        return super().tick(t)
 
     def on_acoustic(
         self, scene: str | None, confidence: float, t: float

@@ -11,6 +11,7 @@ acoustic predictions are ignored, as in the paper, which does not listen while i
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 from servant_core.events import Decision, FusionState
@@ -35,7 +36,36 @@ class FusionConfig:
     picture_interval_s: float = 2.0
 
 
-class SequentialFusion:
+class AcousticWindow(ABC):
+    """What both policies share: the first acoustic opinion since the last decision opens a window
+    of `acoustic_window_s`; if it closes undecided, the policy says `No scene detected` and starts
+    afresh. A policy sets `config`; its `_restart` sets `opened_at` and `acoustic_confidence`."""
+
+    config: FusionConfig
+    opened_at: float | None
+    acoustic_confidence: float
+
+    @abstractmethod
+    def _restart(self) -> None: ...
+
+    @abstractmethod
+    def state(self, t: float) -> FusionState: ...
+
+    def seconds_left(self, t: float) -> float | None:
+        if self.opened_at is None:
+            return None
+        return max(0.0, self.opened_at + self.config.acoustic_window_s - t)
+
+    def tick(self, t: float) -> list[Decision | FusionState]:
+        """Close the window if its time is up: `No scene detected`, and listen again."""
+        if self.opened_at is None or t - self.opened_at <= self.config.acoustic_window_s:
+            return []
+        decision = Decision(t, None, 0.0, NO_SCENE, self.acoustic_confidence, 0.0)
+        self._restart()
+        return [decision, self.state(t)]
+
+
+class SequentialFusion(AcousticWindow):
     def __init__(self, config: FusionConfig | None = None) -> None:
         self.config = config or FusionConfig()
         self._restart()
@@ -55,18 +85,7 @@ class SequentialFusion:
         return "confirming" if self.matches else "looking"
 
     def state(self, t: float) -> FusionState:
-        left = None
-        if self.opened_at is not None:
-            left = max(0.0, self.opened_at + self.config.acoustic_window_s - t)
-        return FusionState(t, self.phase, self.scene, left, self.pictures_taken)
-
-    def tick(self, t: float) -> list[Decision | FusionState]:
-        """Close the window if its time is up: `No scene detected`, and listen again."""
-        if self.opened_at is None or t - self.opened_at <= self.config.acoustic_window_s:
-            return []
-        decision = Decision(t, None, 0.0, NO_SCENE, self.acoustic_confidence, 0.0)
-        self._restart()
-        return [decision, self.state(t)]
+        return FusionState(t, self.phase, self.scene, self.seconds_left(t), self.pictures_taken)
 
     def on_acoustic(
         self, scene: str | None, confidence: float, t: float

@@ -7,7 +7,8 @@ A recogniser is a scikit-learn-style estimator for one sense (`"audio"` or `"ima
 - `fit(X, scenes)` on featurized rows, returns `self`; learned attributes end in `_`;
   `scenes_` lists the scenes in the column order of `predict_proba`.
 - `predict(X)` → str array, `UNKNOWN` where no scene can be named;
-  `confidence(X)` → percent (the paper's formulas in paper mode);
+  `confidence(X)` → a number whose unit `confidence_unit` names: `PERCENT` (a probability in
+  percent) or, in paper mode, the paper's formula ("eq. 1", "eq. 2"), which is no percentage;
   `predict_proba(X)` → (n, len(scenes_)) rows summing to one.
 - `get_state()` → (JSON-able header, dict of arrays); `from_state(header, arrays)` rebuilds it.
   That is how models are saved without pickle (see `servant_core.modelfile`).
@@ -25,11 +26,13 @@ import numpy as np
 from servant_core.errors import ServantError
 
 UNKNOWN = "<unknown>"
+PERCENT = "%"
 
 
 class Recogniser(Protocol):
     method: ClassVar[str]
     sense: ClassVar[str]
+    confidence_unit: ClassVar[str]
 
     @property
     def scenes_(self) -> list[str]:

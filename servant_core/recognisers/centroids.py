@@ -23,6 +23,7 @@ from sklearn.exceptions import NotFittedError
 from sklearn.metrics.pairwise import euclidean_distances
 
 from servant_core.recognisers.base import (
+    PERCENT,
     UNKNOWN,
     check_training_scenes,
     cluster_spreads,
@@ -157,6 +158,7 @@ class CentroidRecogniser:
 
     method: ClassVar[str]
     sense: ClassVar[str]
+    confidence_unit: ClassVar[str] = PERCENT
 
     clusters_per_scene: int
     spread_shrinkage: float

@@ -40,6 +40,7 @@ class KMeansSceneRecogniser:
     method: ClassVar[str] = "paper"
     sense: ClassVar[str]
     confidence_divisor: ClassVar[float]
+    confidence_unit: ClassVar[str]  # the paper's equation: not a percentage
 
     random_state: int | None
     n_init: int
@@ -123,6 +124,7 @@ class KMeansSceneRecogniser:
 class PaperAcousticRecogniser(KMeansSceneRecogniser):
     sense = "audio"
     confidence_divisor = 10000.0
+    confidence_unit = "eq. 1"
 
     def __init__(
         self,
@@ -154,6 +156,7 @@ class PaperVisualRecogniser(KMeansSceneRecogniser):
 
     sense = "image"
     confidence_divisor = 1.0
+    confidence_unit = "eq. 2"
 
     def __init__(
         self, *, n_colours: int = DEFAULT_COLOURS, random_state: int | None = 0, n_init: int = 10

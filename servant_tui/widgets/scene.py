@@ -8,10 +8,14 @@ from rich.table import Table
 from rich.text import Text
 from textual.widgets import Static
 
+from servant_core.event_text import average_unit, confidence_text
 from servant_core.events import AcousticPrediction, Decision, FusionState, VisualPrediction
-from servant_tui.widgets.text import bar, clock, percent
+from servant_tui.widgets.text import bar, clock
 
 HISTORY = 5
+# A sense's row: the scene, then its confidence ending at this column when the scene leaves room
+# (a percentage always does; the paper's eq. 1, often thousands below zero, may not).
+PREDICTION_WIDTH = 20
 
 
 class ScenePane(Static):
@@ -52,10 +56,11 @@ class ScenePane(Static):
                 table.add_row(name, Text("–", "grey50"))
             else:
                 scene = prediction.scene or "unknown place"
-                table.add_row(
-                    name,
-                    Text.assemble((f"{scene:<13}", "cyan"), percent(prediction.confidence), " %"),
+                confidence = confidence_text(
+                    prediction.confidence, prediction.confidence_unit, width=5
                 )
+                pad = max(len(scene) + 1, PREDICTION_WIDTH - len(confidence))
+                table.add_row(name, Text.assemble((scene.ljust(pad), "cyan"), confidence))
         table.add_row("fusion", self._fusion_text())
         table.add_row("window", self._window_text())
         pictures = self.fusion.pictures_taken if self.fusion else 0
@@ -66,7 +71,8 @@ class ScenePane(Static):
         else:
             style = "bold green" if last.scene else "yellow"
             table.add_row("decided", Text(last.line, style))
-            table.add_row("", f"average {last.confidence:.1f} %")
+            unit = average_unit(self.heard, self.seen)
+            table.add_row("", f"average {confidence_text(last.confidence, unit)}")
         for decision in list(self.decisions)[1:]:
             table.add_row(
                 Text(clock(decision.t), "grey50"),

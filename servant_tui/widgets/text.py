@@ -19,7 +19,3 @@ def bar(fraction: float, width: int, style: str = "green") -> Text:
     partial = " ▏▎▍▌▋▊▉"[rest] if full < width else ""
     filled = "█" * full + partial.strip()
     return Text.assemble((filled, style), ("·" * (width - len(filled)), "grey35"))
-
-
-def percent(confidence: float | None) -> str:
-    return "  –  " if confidence is None else f"{confidence:5.1f}"

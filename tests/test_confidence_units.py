@@ -1,0 +1,63 @@
+"""A confidence is shown with what it is: "%" only for a probability in percent (`codebook`,
+`bovw`); the paper's eq. 1 and eq. 2, which are no percentages and go far below zero on real
+audio, with the equation's name."""
+
+from __future__ import annotations
+
+from textual.geometry import Region
+
+from servant_core.event_text import average_unit, confidence_text
+from servant_core.events import AcousticPrediction, Decision, VisualPrediction
+from servant_core.recognisers import ACOUSTIC_METHODS, VISUAL_METHODS
+from servant_tui.app import ServantApp
+from tests.test_tui_live import log_text, settle
+from tests.tui_replay import ReplayEngine
+
+
+def test_each_method_names_the_unit_of_its_confidence():
+    assert ACOUSTIC_METHODS["paper"].confidence_unit == "eq. 1"
+    assert VISUAL_METHODS["paper"].confidence_unit == "eq. 2"
+    assert ACOUSTIC_METHODS["codebook"].confidence_unit == "%"
+    assert VISUAL_METHODS["bovw"].confidence_unit == "%"
+
+
+def test_confidence_text_says_the_unit_when_it_is_known():
+    assert confidence_text(-6433.994, "eq. 1") == "-6434.0 eq. 1"
+    assert confidence_text(88.04, "%", width=5) == " 88.0 %"
+    assert confidence_text(88.04, None) == "88.0"
+
+
+def test_an_average_has_a_unit_only_when_both_senses_share_it():
+    heard = AcousticPrediction(0.0, "cafe", 90.0, confidence_unit="%")
+    seen = VisualPrediction(1.0, "cafe", 80.0, confidence_unit="%")
+    paper_heard = AcousticPrediction(0.0, "cafe", -6433.994, confidence_unit="eq. 1")
+    paper_seen = VisualPrediction(1.0, "cafe", 36.9, confidence_unit="eq. 2")
+    assert average_unit(heard, seen) == "%"
+    assert average_unit(paper_heard, paper_seen) is None
+    assert average_unit(paper_heard, seen) is None
+    assert average_unit(heard, None) is None
+
+
+def paper_script() -> list:
+    return [
+        AcousticPrediction(5.0, "street", -6433.994, {"street": 0.7}, "eq. 1"),
+        VisualPrediction(7.0, "street", 36.9, {"street": 0.6}, "eq. 2"),
+        Decision(9.0, "street", -3198.547, "StreetScene detected", -6433.994, 36.9),
+    ]
+
+
+async def test_paper_confidences_are_shown_with_their_equation_and_no_percent(tmp_path):
+    app = ServantApp(ReplayEngine(paper_script()), library_root=tmp_path)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await settle(pilot, lambda: app.live.scene.decisions)
+        await pilot.pause()
+        pane = app.live.scene
+        shown = "\n".join(strip.text for strip in pane.render_lines(Region(0, 0, *pane.outer_size)))
+        log = log_text(app)
+    assert "street -6434.0 eq. 1" in shown  # whole, in the narrowest layout
+    assert "36.9 eq. 2" in shown
+    assert "average -3198.5" in shown
+    assert "%" not in shown
+    assert "hears street (-6434.0 eq. 1)" in log and "sees street (36.9 eq. 2)" in log
+    assert "StreetScene detected (-3198.5)" in log
+    assert "%" not in log
