@@ -416,7 +416,8 @@ class Engine:
         with self._lock:
             self._scores["acoustic"] = scores
         known = scene != UNKNOWN
-        self._emit(AcousticPrediction(t, scene if known else None, confidence, scores))
+        unit = acoustic.confidence_unit
+        self._emit(AcousticPrediction(t, scene if known else None, confidence, scores, unit))
         if not known:
             self._ask_label("audio", _Kept("audio", window, rate), scores, t)
         with self._lock:
@@ -465,7 +466,8 @@ class Engine:
         with self._lock:
             self._scores["visual"] = scores
             events = self.fusion.on_visual(scene if known else None, confidence, t)
-        self._emit(VisualPrediction(t, scene if known else None, confidence, scores))
+        unit = visual.confidence_unit
+        self._emit(VisualPrediction(t, scene if known else None, confidence, scores, unit))
         # The decision (and the arm's move) first; the palette is only for show.
         self._handle(events)
         matched = visual.matched_palette(X)[0] if hasattr(visual, "matched_palette") else None

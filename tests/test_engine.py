@@ -97,6 +97,9 @@ def test_replaying_a_library_detects_each_scene(library, recognisers):
     truth = [r.scene for r in library.recordings for _ in range(3)]
     assert np.mean([e.scene == s for e, s in zip(windows, truth, strict=True)]) >= 0.9
     assert all(abs(sum(e.scores.values()) - 1) < 1e-6 for e in windows)
+    # the paper's recognisers: their confidences are eqs. 1 and 2, not percentages
+    assert {e.confidence_unit for e in windows} == {"eq. 1"}
+    assert {e.confidence_unit for e in events if isinstance(e, VisualPrediction)} == {"eq. 2"}
     detected = {e.scene for e in events if isinstance(e, Decision) and e.scene}
     assert detected == set(SCENES)
     spectra = [e for e in events if isinstance(e, SpectrumFrame)]
