@@ -231,6 +231,12 @@ class Engine:
             return
         self._stop.clear()
         self._finished.clear()
+        # An arm attached before anyone subscribed (the demo's) is said again to those who now
+        # listen, or a front end would never learn that there is an arm to arm.
+        servo = self._status.get("servo")
+        if servo is not None:
+            self._emit(servo)
+        self._emit_arm_state()
         self._open_senses()
         self._arm_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="servant-arm")
         self._thread = threading.Thread(target=self._run, name="servant-senses", daemon=True)

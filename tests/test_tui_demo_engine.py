@@ -16,4 +16,9 @@ async def test_demo_engine_reaches_a_decision_in_the_log(tmp_path):
         assert app.live.spectrum.frames_shown > 0
         assert "detected" in log_text(app)
         assert app.library_root == tmp_path
+        # the demo's emulated arm, attached before the app subscribed, is known and can be armed
+        assert app.arm_state is not None and app.arm_state.connected and not app.arm_state.armed
+        assert app.check_action("toggle_arm", ()) is True
+        await pilot.press("a")
+        await settle(pilot, lambda: app.arm_state.armed)
     assert not engine.running, "quitting stops the engine's threads"
