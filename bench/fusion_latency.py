@@ -25,16 +25,10 @@ sys.path.insert(0, str(REPO))
 
 from common import shared_data  # noqa: E402
 
-from servant_core.evaluate import (  # noqa: E402
-    IMAGE_TRAIN_FRACTION,
-    featurize_library_audio,
-    file_order_split,
-    temporal_split,
-)
+from servant_core.evaluate import fit_paired  # noqa: E402
 from servant_core.events import Decision  # noqa: E402
 from servant_core.fusion import POLICIES, FusionConfig  # noqa: E402
-from servant_core.library import SceneLibrary, read_pictures  # noqa: E402
-from servant_core.recognisers import make_recogniser  # noqa: E402
+from servant_core.library import SceneLibrary  # noqa: E402
 
 HORIZON_S = 60.0
 STEP_S = 0.5
@@ -79,15 +73,14 @@ def main() -> None:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         library = paired_library(Path(tmp))
-        audio = make_recogniser("audio", args.audio_method)
-        wf = featurize_library_audio(library, audio)
-        train = temporal_split(wf.recording, wf.position)
-        audio.fit(wf.features[train], wf.scenes[train])
-        visual = make_recogniser("image", args.image_method)
-        images, kept = read_pictures(library.pictures)
-        X = visual.featurize(images)
-    p_train = file_order_split(kept, IMAGE_TRAIN_FRACTION)
-    visual.fit(X[p_train], [p.scene for p, t in zip(kept, p_train, strict=True) if t])
+        fitted = fit_paired(library, args.audio_method, args.image_method, None)
+    audio, wf, train = fitted.audio, fitted.windows, fitted.window_train
+    visual, X, kept, p_train = (
+        fitted.visual,
+        fitted.picture_features,
+        fitted.pictures,
+        fitted.picture_train,
+    )
     test = ~train
     a_scene, a_conf = audio.predict(wf.features[test]), audio.confidence(wf.features[test])
     v_rows = np.flatnonzero(~p_train)

@@ -273,7 +273,7 @@ class PairedFit:
     picture_train: np.ndarray  # which of `pictures` trained `visual`
 
 
-def _fit_paired(
+def fit_paired(
     library: SceneLibrary,
     acoustic_method: str,
     visual_method: str,
@@ -345,7 +345,7 @@ def evaluate_fusion(
         )
     config = config or FusionConfig()
     paired = _paired_scenes(library, None, "fusion needs")
-    fitted = _fit_paired(library.restricted(paired), acoustic_method, visual_method, on_error)
+    fitted = fit_paired(library.restricted(paired), acoustic_method, visual_method, on_error)
     wf, train = fitted.windows, fitted.window_train
     a_scene = fitted.audio.predict(wf.features[~train])
     a_conf = fitted.audio.confidence(wf.features[~train])
@@ -429,7 +429,7 @@ def paper_tables(
     config = config or FusionConfig()
     paired = _paired_scenes(library, test_library, "the tables need")
     library = library.restricted(paired)
-    fitted = _fit_paired(
+    fitted = fit_paired(
         library, acoustic_method, visual_method, on_error, train_on_all=test_library is not None
     )
     audio, visual = fitted.audio, fitted.visual
