@@ -172,6 +172,32 @@ def test_a_first_retrain_without_recognisers_fits_fresh_ones_and_saves_them(libr
     assert list(heard) == list(SCENES)
 
 
+def test_a_first_teach_session_of_one_window_and_one_picture_a_scene_is_enough(tmp_path):
+    """Teach mode writes one 5 s window and one picture per press: the fresh recognisers must
+    learn from that much (no LDA with a row a scene, no open set without spreads to measure)."""
+    root = tmp_path / "taught"
+    for s, scene in enumerate(SCENES):
+        write_wav(
+            root / scene / "w.wav", synth_window(scene, np.random.default_rng([9, s])), DEMO_RATE
+        )
+        cv2.imwrite(
+            str(root / scene / "p.png"), synth_picture(scene, np.random.default_rng([9, s]))
+        )
+    engine = Engine(model_path=tmp_path / "model.npz")
+    engine.retrain(root)
+    saved = load_model(tmp_path / "model.npz")  # and the file holds what the engine uses
+    acoustic, visual = saved["acoustic"], saved["visual"]
+    heard = np.stack(
+        [
+            resample(synth_window(s, np.random.default_rng([10, i])), DEMO_RATE, acoustic.rate)
+            for i, s in enumerate(SCENES)
+        ]
+    )
+    seen = [synth_picture(s, np.random.default_rng([10, i])) for i, s in enumerate(SCENES)]
+    assert list(acoustic.predict(acoustic.featurize(heard))) == list(SCENES)
+    assert list(visual.predict(visual.featurize(seen))) == list(SCENES)
+
+
 def test_servant_alone_and_run_load_and_save_the_model_teach_mode_saved(recognisers):
     parser = build_parser()
     default = default_model_file()

@@ -84,7 +84,14 @@ class SceneCentroids:
         spreads = spreads ** (1 - spread_shrinkage) * np.median(spreads) ** spread_shrinkage
         counts = np.bincount(assigned, minlength=len(centre_arr)).astype(np.float64)
         own = np.linalg.norm(D - centre_arr[assigned], axis=1) / spreads[assigned]
-        reject = float(np.quantile(own, reject_quantile) * reject_margin)
+        # Only rows whose cluster's spread was measured (two members or more) say how far a
+        # known place strays; with too few of them (a first teach session: a window or two a
+        # scene) nothing can be called unknown yet, rather than everything.
+        measured = counts[assigned] >= 2
+        if measured.sum() < MIN_CLUSTER_ROWS:
+            reject = float("inf")
+        else:
+            reject = float(np.quantile(own[measured], reject_quantile) * reject_margin)
         return cls(names, centre_arr, owner, spreads, counts, reject)
 
     def distances(self, D: np.ndarray) -> np.ndarray:
@@ -193,9 +200,14 @@ class CentroidRecogniser:
         D = self._standardise(D)
         if self.discriminant:
             # A light linear step before the centroids: the directions that best separate the
-            # training scenes (shrunk LDA, stable with fewer rows than dimensions).
-            lda = LinearDiscriminantAnalysis(solver="eigen", shrinkage="auto").fit(D, scenes)
-            self.projection_ = lda.scalings_[:, : len(lda.classes_) - 1]
+            # training scenes (shrunk LDA, stable with fewer rows than dimensions). It needs more
+            # rows than scenes; below that (a picture a scene) the descriptors stay as they are.
+            n_scenes = len(set(np.asarray(scenes).tolist()))
+            if len(D) > n_scenes:
+                lda = LinearDiscriminantAnalysis(solver="eigen", shrinkage="auto").fit(D, scenes)
+                self.projection_ = lda.scalings_[:, : len(lda.classes_) - 1]
+            else:
+                self.projection_ = np.eye(D.shape[1])
             D = self._project(D)
         self.head_ = self._fit_head(D, scenes)
         if self.whitened_novelty:
