@@ -603,36 +603,56 @@ class Engine:
     def retrain(self, library: SceneLibrary | str | Path) -> None:
         """Refit copies of both recognisers on a scene library, then swap them in (the senses keep
         running on the old ones meanwhile). A sense without a recogniser gets a new one of its
-        `fresh_methods` method. Unreadable files are reported and skipped."""
+        `fresh_methods` method. Unreadable files are reported and skipped. A sense that cannot
+        be trained (e.g. pictures of one scene only) is reported and keeps its recogniser while
+        the other is retrained; if neither can be, the first reason is raised."""
         if not isinstance(library, SceneLibrary):
             library = SceneLibrary.scan(library)
         with self._update_lock:
             with self._lock:
                 acoustic, visual = self.acoustic, self.visual
-            new_acoustic = new_visual = None
-            if library.recordings:
-                model = self._copy_or_fresh(acoustic, "audio")
-                windows = featurize_recordings(
-                    library.recordings,
-                    model.featurize,
-                    rate=getattr(model, "rate", DEFAULT_RATE),
-                    seconds=self.window_seconds,
-                    on_error=lambda e: self._error(str(e)),
-                )
-                new_acoustic = model.fit(windows.features, list(windows.scenes))
-            if library.pictures:
-                model = self._copy_or_fresh(visual, "image")
-                images, kept = read_pictures(
-                    library.pictures, on_error=lambda e: self._error(str(e))
-                )
-                if images:
-                    new_visual = model.fit(model.featurize(images), [p.scene for p in kept])
+            fitted: dict[str, Any] = {}
+            failures: list[ServantError] = []
+            for sense, refit in (("audio", self._refit_acoustic), ("image", self._refit_visual)):
+                try:
+                    fitted[sense] = refit(library, acoustic if sense == "audio" else visual)
+                except ServantError as error:
+                    what = "sound" if sense == "audio" else "pictures"
+                    failures.append(ServantError(f"retrain ({what}): {error}"))
+            if failures and not any(fitted.values()):
+                raise failures[0]
+            for failure in failures:
+                self._error(str(failure))
             with self._lock:
-                self.acoustic = new_acoustic or self.acoustic
-                self.visual = new_visual or self.visual
+                self.acoustic = fitted.get("audio") or self.acoustic
+                self.visual = fitted.get("image") or self.visual
                 self.retrain_needed = False
-            if new_acoustic is not None or new_visual is not None:
+            if any(fitted.values()):
                 self._save_models()
+
+    def _refit_acoustic(self, library: SceneLibrary, acoustic: Recogniser | None) -> Any:
+        """A copy of `acoustic` (or a fresh one) fitted on the library's windows; None if none."""
+        if not library.recordings:
+            return None
+        model = self._copy_or_fresh(acoustic, "audio")
+        windows = featurize_recordings(
+            library.recordings,
+            model.featurize,
+            rate=getattr(model, "rate", DEFAULT_RATE),
+            seconds=self.window_seconds,
+            on_error=lambda e: self._error(str(e)),
+        )
+        return model.fit(windows.features, list(windows.scenes))
+
+    def _refit_visual(self, library: SceneLibrary, visual: Recogniser | None) -> Any:
+        """A copy of `visual` (or a fresh one) fitted on the library's pictures; None if none."""
+        if not library.pictures:
+            return None
+        model = self._copy_or_fresh(visual, "image")
+        images, kept = read_pictures(library.pictures, on_error=lambda e: self._error(str(e)))
+        if not images:
+            return None
+        return model.fit(model.featurize(images), [p.scene for p in kept])
 
     def _copy_or_fresh(self, recogniser: Recogniser | None, sense: str) -> Any:
         if recogniser is not None:

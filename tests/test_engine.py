@@ -198,6 +198,30 @@ def test_a_first_teach_session_of_one_window_and_one_picture_a_scene_is_enough(t
     assert list(visual.predict(visual.featurize(seen))) == list(SCENES)
 
 
+def test_a_sense_that_cannot_be_retrained_is_reported_and_the_other_still_is(recognisers, tmp_path):
+    acoustic, visual = recognisers
+    root = tmp_path / "lib"
+    for s, scene in enumerate(SCENES):
+        write_wav(
+            root / scene / "w.wav", synth_window(scene, np.random.default_rng([11, s])), DEMO_RATE
+        )
+    cv2.imwrite(str(root / "coffee" / "p.png"), synth_picture("coffee", np.random.default_rng(11)))
+    engine = Engine(acoustic=acoustic, visual=visual)
+    events = collect(engine)
+    engine.retrain(root)  # pictures of one scene only: the camera's recogniser cannot learn
+    assert engine.acoustic is not acoustic and engine.visual is visual
+    errors = [e.message for e in events if isinstance(e, ErrorEvent)]
+    assert (
+        len(errors) == 1
+        and errors[0].startswith("retrain (pictures): ")
+        and "two scenes" in errors[0]
+    )
+    (root / "gym" / "w.wav").unlink()
+    (root / "street" / "w.wav").unlink()
+    with pytest.raises(ServantError):  # neither sense has two scenes: nothing changes
+        engine.retrain(root)
+
+
 def test_servant_alone_and_run_load_and_save_the_model_teach_mode_saved(recognisers):
     parser = build_parser()
     default = default_model_file()
