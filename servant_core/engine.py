@@ -22,6 +22,7 @@ Factories for front ends: `build_demo_engine` (the synthesised walk) and `build_
 from __future__ import annotations
 
 import copy
+import dataclasses
 import logging
 import re
 import threading
@@ -60,6 +61,9 @@ from servant_core.recognisers import UNKNOWN, Recogniser, make_recogniser
 from servant_core.storage import atomic_write_bytes, data_dir
 
 log = logging.getLogger(__name__)
+
+# What a retrain fits for a sense that has no recogniser yet: the methods beyond the paper.
+FRESH_METHODS = {"audio": "codebook", "image": "bovw"}
 
 Subscriber = Callable[[Event], None]
 Pose = Mapping[str, float]
@@ -102,8 +106,8 @@ class Engine:
     - `clock`: the engine's time in seconds (default: monotonic seconds since construction).
     - `window_seconds`: the window the acoustic recogniser judges (default: its own, else 5 s).
     - `library_root`: where `label_unknown` writes (default `data_dir()/"library"`).
-    - `fresh_methods`: the (acoustic, visual) methods a retrain fits for a sense that has no
-      recogniser yet (a first start, before anything was taught).
+    - `fresh_methods`: {sense: method} a retrain fits for a sense that has no recogniser yet
+      (a first start, before anything was taught); default `FRESH_METHODS`.
     - `model_path`: the model file the recognisers came from. After a retrain or a fold-in the
       updated recognisers are saved back to it (atomically), so what the user taught survives a
       restart; None (the demo, or no model) keeps updates in memory only.
@@ -128,7 +132,7 @@ class Engine:
         reopen_seconds: float = 2.0,
         library_root: str | Path | None = None,
         model_path: str | Path | None = None,
-        fresh_methods: tuple[str, str] = ("codebook", "bovw"),
+        fresh_methods: Mapping[str, str] | None = None,
     ) -> None:
         self.audio = audio
         self.camera = camera
@@ -144,7 +148,7 @@ class Engine:
         self.reopen_seconds = reopen_seconds
         self.library_root = Path(library_root) if library_root else None
         self.model_path = Path(model_path) if model_path else None
-        self.fresh_methods = fresh_methods
+        self.fresh_methods = dict(fresh_methods or FRESH_METHODS)
         self.retrain_needed = False
 
         self._subscribers: list[Subscriber] = []
@@ -483,6 +487,10 @@ class Engine:
 
     def _handle(self, events: list[Any]) -> None:
         for event in events:
+            if isinstance(event, Decision) and event.scene is not None:
+                with self._lock:
+                    unit = decision_unit(self.acoustic, self.visual)
+                event = dataclasses.replace(event, confidence_unit=unit)
             self._emit(event)
             if isinstance(event, Decision) and event.scene is not None:
                 self._act(event.scene)
@@ -611,24 +619,27 @@ class Engine:
         with self._update_lock:
             with self._lock:
                 acoustic, visual = self.acoustic, self.visual
-            fitted: dict[str, Any] = {}
+            new_acoustic = new_visual = None
             failures: list[ServantError] = []
-            for sense, refit in (("audio", self._refit_acoustic), ("image", self._refit_visual)):
-                try:
-                    fitted[sense] = refit(library, acoustic if sense == "audio" else visual)
-                except ServantError as error:
-                    what = "sound" if sense == "audio" else "pictures"
-                    failures.append(ServantError(f"retrain ({what}): {error}"))
-            if failures and not any(fitted.values()):
-                raise failures[0]
+            try:
+                new_acoustic = self._refit_acoustic(library, acoustic)
+            except ServantError as error:
+                failures.append(ServantError(f"retrain (sound): {error}"))
+            try:
+                new_visual = self._refit_visual(library, visual)
+            except ServantError as error:
+                failures.append(ServantError(f"retrain (pictures): {error}"))
+            if new_acoustic is None and new_visual is None:
+                if failures:
+                    raise failures[0]
+                return
             for failure in failures:
                 self._error(str(failure))
             with self._lock:
-                self.acoustic = fitted.get("audio") or self.acoustic
-                self.visual = fitted.get("image") or self.visual
+                self.acoustic = new_acoustic or self.acoustic
+                self.visual = new_visual or self.visual
                 self.retrain_needed = False
-            if any(fitted.values()):
-                self._save_models()
+            self._save_models()
 
     def _refit_acoustic(self, library: SceneLibrary, acoustic: Recogniser | None) -> Any:
         """A copy of `acoustic` (or a fresh one) fitted on the library's windows; None if none."""
@@ -657,7 +668,7 @@ class Engine:
     def _copy_or_fresh(self, recogniser: Recogniser | None, sense: str) -> Any:
         if recogniser is not None:
             return copy.deepcopy(recogniser)
-        return make_recogniser(sense, self.fresh_methods[0 if sense == "audio" else 1])
+        return make_recogniser(sense, self.fresh_methods[sense])
 
     def _ask_label(self, sense: str, kept: _Kept, scores: dict[str, float], t: float) -> None:
         with self._lock:
@@ -736,6 +747,13 @@ class Engine:
                 f"{self.model_path}: the updated model could not be saved ({error}); it is used "
                 "until the program ends, and the file keeps the previous model"
             )
+
+
+def decision_unit(*recognisers: Recogniser | None) -> str | None:
+    """The unit of an average of these recognisers' confidences (a decision's): theirs when they
+    all share one, as percentages do; else None (the paper's eq. 1 and eq. 2 share none)."""
+    units = {getattr(r, "confidence_unit", None) for r in recognisers}
+    return units.pop() if len(units) == 1 else None
 
 
 def _predict(recogniser: Recogniser, X: np.ndarray) -> tuple[str, float, dict[str, float]]:

@@ -9,8 +9,6 @@ recogniser says it is a probability in percent; the paper's eq. 1 and eq. 2 are 
 
 from __future__ import annotations
 
-from servant_core.events import AcousticPrediction, VisualPrediction
-
 UNKNOWN_PLACE = "an unknown place"
 
 
@@ -24,10 +22,3 @@ def confidence_text(confidence: float, unit: str | None, width: int = 0) -> str:
     is not known; the number is right-aligned in at least `width` characters."""
     number = f"{confidence:{width}.1f}"
     return f"{number} {unit}" if unit else number
-
-
-def average_unit(*predictions: AcousticPrediction | VisualPrediction | None) -> str | None:
-    """The unit of an average of these predictions' confidences (a decision's): theirs when they
-    all share one, as percentages do; else None (the paper's eq. 1 and eq. 2 share none)."""
-    units = {p.confidence_unit if p is not None else None for p in predictions}
-    return units.pop() if len(units) == 1 else None

@@ -72,6 +72,9 @@ class Decision:
     line: str  # "CoffeeScene detected" / "No scene detected"
     acoustic_confidence: float = 0.0
     visual_confidence: float = 0.0
+    # "%" when both senses' confidences are percentages; None when they are not (the paper's
+    # eq. 1 and eq. 2 averaged) or not said.
+    confidence_unit: str | None = None
 
 
 @dataclass(frozen=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import tempfile
@@ -59,9 +60,8 @@ def _sync_directory(folder: Path) -> None:
     except OSError:
         return  # e.g. Windows: a folder cannot be opened this way; the rename itself stands
     try:
-        os.fsync(fd)
-    except OSError:
-        pass  # some file systems refuse fsync on a folder; nothing better can be done
+        with contextlib.suppress(OSError):  # some file systems refuse fsync on a folder
+            os.fsync(fd)
     finally:
         os.close(fd)
 

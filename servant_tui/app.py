@@ -14,7 +14,7 @@ from textual.screen import Screen
 from textual.worker import Worker, WorkerState
 
 from servant_core.errors import ServantError
-from servant_core.event_text import average_unit, confidence_text, place
+from servant_core.event_text import confidence_text, place
 from servant_core.events import (
     AcousticPrediction,
     ArmState,
@@ -76,8 +76,6 @@ class ServantApp(App[None]):
         self.settings = settings
         self.arm_state: ArmState | None = None
         self.known_scenes: set[str] = set()
-        # the latest prediction of each sense: a decision's confidence is their average
-        self.predictions: dict[type, AcousticPrediction | VisualPrediction] = {}
         self.live = LiveScreen()
         self._prompt_open = False
         engine.subscribe(self._from_engine)
@@ -121,10 +119,8 @@ class ServantApp(App[None]):
             if changed:
                 self.refresh_bindings()
                 self.log_line(event.t, self._arm_line(event))
-        elif isinstance(event, (AcousticPrediction, VisualPrediction)):
-            self.predictions[type(event)] = event
-            if event.scene:
-                self.known_scenes.add(event.scene)
+        elif isinstance(event, (AcousticPrediction, VisualPrediction)) and event.scene:
+            self.known_scenes.add(event.scene)
         line = self._log_text(event)
         if line:
             self.log_line(event.t, line)
@@ -140,11 +136,11 @@ class ServantApp(App[None]):
     def _event_screens(self) -> Iterable[Any]:
         return [s for s in self.screen_stack if hasattr(s, "show_event")]
 
-    def _log_text(self, event: Any) -> str | None:
+    @staticmethod
+    def _log_text(event: Any) -> str | None:
         if isinstance(event, Decision):
             if event.scene:
-                unit = average_unit(*self.predictions.values())
-                confidence = confidence_text(event.confidence, unit)
+                confidence = confidence_text(event.confidence, event.confidence_unit)
                 return f"[bold green]{escape(event.line)}[/] ({confidence})"
             return f"[yellow]{escape(event.line)}[/]"
         if isinstance(event, (AcousticPrediction, VisualPrediction)):

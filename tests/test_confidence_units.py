@@ -6,7 +6,8 @@ from __future__ import annotations
 
 from textual.geometry import Region
 
-from servant_core.event_text import average_unit, confidence_text
+from servant_core.engine import decision_unit
+from servant_core.event_text import confidence_text
 from servant_core.events import AcousticPrediction, Decision, VisualPrediction
 from servant_core.recognisers import ACOUSTIC_METHODS, VISUAL_METHODS
 from servant_tui.app import ServantApp
@@ -27,15 +28,13 @@ def test_confidence_text_says_the_unit_when_it_is_known():
     assert confidence_text(88.04, None) == "88.0"
 
 
-def test_an_average_has_a_unit_only_when_both_senses_share_it():
-    heard = AcousticPrediction(0.0, "cafe", 90.0, confidence_unit="%")
-    seen = VisualPrediction(1.0, "cafe", 80.0, confidence_unit="%")
-    paper_heard = AcousticPrediction(0.0, "cafe", -6433.994, confidence_unit="eq. 1")
-    paper_seen = VisualPrediction(1.0, "cafe", 36.9, confidence_unit="eq. 2")
-    assert average_unit(heard, seen) == "%"
-    assert average_unit(paper_heard, paper_seen) is None
-    assert average_unit(paper_heard, seen) is None
-    assert average_unit(heard, None) is None
+def test_a_decision_has_a_unit_only_when_both_senses_share_it():
+    codebook, bovw = ACOUSTIC_METHODS["codebook"](), VISUAL_METHODS["bovw"]()
+    paper_heard, paper_seen = ACOUSTIC_METHODS["paper"](), VISUAL_METHODS["paper"]()
+    assert decision_unit(codebook, bovw) == "%"
+    assert decision_unit(paper_heard, paper_seen) is None
+    assert decision_unit(paper_heard, bovw) is None
+    assert decision_unit(codebook, None) is None
 
 
 def paper_script() -> list:

@@ -171,6 +171,17 @@ def test_a_first_retrain_without_recognisers_fits_fresh_ones_and_saves_them(libr
     heard = acoustic.predict(acoustic.featurize(fresh))
     assert list(heard) == list(SCENES)
 
+    # and the engine runs on them: its decisions average two percentages, and say so
+    clock = ManualClock()
+    engine.audio = replay_recordings(library.recordings, DEMO_RATE, realtime=False, clock=clock)
+    engine.camera = PictureReplay(library.pictures, scene_of=lambda: engine.audio.current_label)
+    engine.clock = clock
+    engine.fusion = SequentialFusion(FusionConfig(acoustic_window_s=10.0))
+    events = collect(engine)
+    engine.run_until(1e9)
+    decided = [e for e in events if isinstance(e, Decision) and e.scene]
+    assert decided and {e.confidence_unit for e in decided} == {"%"}
+
 
 def test_a_first_teach_session_of_one_window_and_one_picture_a_scene_is_enough(tmp_path):
     """Teach mode writes one 5 s window and one picture per press: the fresh recognisers must

@@ -65,7 +65,7 @@ def demo_script() -> list[Any]:
         VisualPrediction(44.0, "CoffeeScene", 83.8, {"CoffeeScene": 0.8}, "%"),
         FusionState(44.0, "confirming", "CoffeeScene", 26.0, 1),
         FusionState(48.0, "confirming", "CoffeeScene", 22.0, 2),
-        Decision(48.0, "CoffeeScene", 87.5, "CoffeeScene detected", 91.2, 83.8),
+        Decision(48.0, "CoffeeScene", 87.5, "CoffeeScene detected", 91.2, 83.8, "%"),
         ArmState(
             48.0,
             True,

@@ -87,18 +87,19 @@ def live_settings(args: argparse.Namespace | None = None) -> LiveSettings:
     (`default_model_file()`, if there is one yet) and retrains and fold-ins are saved back to it.
     """
     default = default_model_file()
+    taught = default if default.is_file() else None
     if args is None:
         from servant_core.settings import load_settings
 
         chosen = load_settings()
         return LiveSettings(
-            model=default if default.is_file() else None,
+            model=taught,
             model_path=default,
             microphone=chosen.audio_device,
             camera=chosen.camera if chosen.camera is not None else 0,
         )
     return LiveSettings(
-        model=args.model or (default if default.is_file() else None),
+        model=args.model or taught,
         model_path=args.model or default,
         microphone=args.mic,
         rate=args.rate,
@@ -143,13 +144,12 @@ def _printer(as_json: bool) -> Any:
 def _event_line(event: Event) -> str | None:
     """The line a person reads for an event, or None for events too frequent to print."""
     at = f"[{event.t:7.2f}]"
-    if isinstance(event, Decision):
-        return f"{at} {event.line}  confidence {event.confidence:.3f}"
-    if isinstance(event, AcousticPrediction):
+    if isinstance(event, (Decision, AcousticPrediction, VisualPrediction)):
         confidence = confidence_text(event.confidence, event.confidence_unit)
-        return f"{at} heard {place(event.scene)}  acoustic confidence {confidence}"
-    if isinstance(event, VisualPrediction):
-        confidence = confidence_text(event.confidence, event.confidence_unit)
+        if isinstance(event, Decision):
+            return f"{at} {event.line}  confidence {confidence}"
+        if isinstance(event, AcousticPrediction):
+            return f"{at} heard {place(event.scene)}  acoustic confidence {confidence}"
         return f"{at} saw {place(event.scene)}  visual confidence {confidence}"
     if isinstance(event, UnknownScene):
         return f"{at} unknown {event.sense} ({event.window_id}), nearest: {event.nearest_scene}"

@@ -191,7 +191,7 @@ class CentroidRecogniser:
         raise NotImplementedError
 
     def fit(self, X: np.ndarray, scenes: Sequence[str] | np.ndarray) -> Self:
-        check_training_scenes(scenes, len(X))
+        names = check_training_scenes(scenes, len(X))
         self._fit_codebooks(X)
         D = self.describe(X)
         self.mean_ = D.mean(axis=0)
@@ -202,8 +202,7 @@ class CentroidRecogniser:
             # A light linear step before the centroids: the directions that best separate the
             # training scenes (shrunk LDA, stable with fewer rows than dimensions). It needs more
             # rows than scenes; below that (a picture a scene) the descriptors stay as they are.
-            n_scenes = len(set(np.asarray(scenes).tolist()))
-            if len(D) > n_scenes:
+            if len(D) > len(names):
                 lda = LinearDiscriminantAnalysis(solver="eigen", shrinkage="auto").fit(D, scenes)
                 self.projection_ = lda.scalings_[:, : len(lda.classes_) - 1]
             else:

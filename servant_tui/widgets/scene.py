@@ -8,7 +8,7 @@ from rich.table import Table
 from rich.text import Text
 from textual.widgets import Static
 
-from servant_core.event_text import average_unit, confidence_text
+from servant_core.event_text import confidence_text
 from servant_core.events import AcousticPrediction, Decision, FusionState, VisualPrediction
 from servant_tui.widgets.text import bar, clock
 
@@ -71,8 +71,8 @@ class ScenePane(Static):
         else:
             style = "bold green" if last.scene else "yellow"
             table.add_row("decided", Text(last.line, style))
-            unit = average_unit(self.heard, self.seen)
-            table.add_row("", f"average {confidence_text(last.confidence, unit)}")
+            average = confidence_text(last.confidence, last.confidence_unit)
+            table.add_row("", f"average {average}")
         for decision in list(self.decisions)[1:]:
             table.add_row(
                 Text(clock(decision.t), "grey50"),
