@@ -16,7 +16,7 @@ as `DeviceStatus(ok=False)` or `ErrorEvent`, and the engine carries on with the 
 reopening a failed device every `reopen_seconds`.
 
 Factories for front ends: `build_demo_engine` (the synthesised walk) and `build_live_engine`
-(microphone, camera, a trained model file).
+(microphone, camera, a trained model file, the user's settings, the arm and its taught poses).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ import re
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,13 +48,14 @@ from servant_core.events import (
     DeviceStatus,
     ErrorEvent,
     Event,
+    Notice,
     Palette,
     SpectrumFrame,
     UnknownScene,
     VisualPrediction,
 )
 from servant_core.features.palette import dominant_colours
-from servant_core.fusion import FusionPolicy, SequentialFusion
+from servant_core.fusion import POLICIES, FusionConfig, FusionPolicy, SequentialFusion
 from servant_core.library import SceneLibrary, featurize_recordings, read_pictures
 from servant_core.modelfile import save_model
 from servant_core.recognisers import UNKNOWN, Recogniser, make_recogniser
@@ -73,6 +74,12 @@ SPECTRUM_SIZE = 2048
 SPECTRUM_FPS = 30.0
 RING_SECONDS = 30.0  # what the ring holds: a window being cut while teach mode records 5 s
 UNKNOWN_KEPT = 16  # unknown windows/pictures kept for the user to label, the oldest dropped first
+NO_MODEL = (
+    "no model yet: nothing can be recognised until two scenes are taught (teach mode, key t: "
+    "5 s of sound and a few pictures of each, then Retrain) or a model is given "
+    "(`servant train LIBRARY -o model.npz`, then --model)"
+)
+NO_POSE = "arm: no pose taught yet, so it stays put; teach one in teach mode (key t), then Train"
 
 
 def spectrum_db(samples: np.ndarray, rate: int) -> tuple[np.ndarray, np.ndarray]:
@@ -111,10 +118,13 @@ class Engine:
     - `model_path`: the model file the recognisers came from. After a retrain or a fold-in the
       updated recognisers are saved back to it (atomically), so what the user taught survives a
       restart; None (the demo, or no model) keeps updates in memory only.
+    - `confidence_threshold`: percent; the arm does not act on a decision whose scene the less
+      sure sense gives less than this (None: no threshold of the engine's own).
 
     Public API used by front ends: `subscribe`, `start`, `stop`, `running`, `join`, `run_until`,
     `status`, `audio_rate`, `record_window`, `take_picture`, `latest_scores`, `retrain`,
-    `retrain_needed`, `label_unknown`, `set_arm`, `arm`, `disarm`, `set_action_learner`.
+    `retrain_needed`, `label_unknown`, `set_arm`, `connect_arm`, `arm`, `disarm`,
+    `set_action_learner`, `apply_settings`, `note`.
     """
 
     def __init__(
@@ -133,6 +143,7 @@ class Engine:
         library_root: str | Path | None = None,
         model_path: str | Path | None = None,
         fresh_methods: Mapping[str, str] | None = None,
+        confidence_threshold: float | None = None,
     ) -> None:
         self.audio = audio
         self.camera = camera
@@ -150,6 +161,7 @@ class Engine:
         self.model_path = Path(model_path) if model_path else None
         self.fresh_methods = dict(fresh_methods or FRESH_METHODS)
         self.retrain_needed = False
+        self.confidence_threshold = confidence_threshold
 
         self._subscribers: list[Subscriber] = []
         self._subscribers_lock = threading.Lock()
@@ -164,7 +176,9 @@ class Engine:
         self._arm_pool: ThreadPoolExecutor | None = None
         self._link: Any = None
         self._pose_for: PoseFor | None = None
+        self._arm_spec: tuple[Any, ...] | None = None  # (port, protocol, joints) of connect_arm
         self._cleanups: list[Callable[[], None]] = []
+        self._notes: list[str] = []  # said to every subscriber when the senses open
 
         self._opened = False
         self._ring: RingBuffer | None = None
@@ -256,6 +270,7 @@ class Engine:
         pool, self._arm_pool = self._arm_pool, None
         if pool is not None:
             pool.shutdown(wait=True)
+        self._close_arm()
         while self._cleanups:
             self._cleanups.pop()()
 
@@ -284,8 +299,18 @@ class Engine:
     def __exit__(self, *exc: object) -> None:
         self.stop()
 
+    def note(self, message: str) -> None:
+        """Say `message` as a `Notice` now and again whenever the senses open: what a front end
+        that subscribes later (a first start's "no model yet") must still hear."""
+        self._notes.append(message)
+        self._emit(Notice(self.clock(), message))
+
     def _open_senses(self) -> None:
         self._opened = True
+        with self._lock:
+            untrained = self.acoustic is None and self.visual is None
+        for message in [*self._notes, *([NO_MODEL] if untrained else [])]:
+            self._emit(Notice(self.clock(), message))
         self._emit(self.fusion.state(self.clock()))
         if self.audio is not None:
             self._open_audio()
@@ -504,15 +529,64 @@ class Engine:
         the two senses' probabilities for the scene. None detaches it."""
         self._pose_for = pose_for
 
-    def set_arm(self, link: Any) -> None:
+    def set_arm(self, link: Any, why_none: str = "servo: no arm attached") -> None:
         """Attach a servo link (`servant_core.servo.link`: `.arm()`, `.disarm()`, `.armed`,
-        `.move_to(pose)`, `.status()`), or None to detach it. The link enforces limits and rate."""
+        `.move_to(pose)`, `.status()`), or None to detach it (`why_none` says why). The link
+        enforces limits and rate. A link attached here is not closed by the engine."""
         self._link = link
         if link is None:
-            self._report("servo", False, "servo: no arm attached")
+            self._report("servo", False, why_none)
         else:
             self._report("servo", True, f"servo: {getattr(link, 'port', None) or 'link'} attached")
-            self._emit_arm_state()
+        self._emit_arm_state()
+
+    def connect_arm(self, port: str | None, protocol: str, joints: Sequence[Any]) -> None:
+        """Open the arm the settings name (disarmed) and attach it, closing the one this method
+        attached before; the engine closes it when it stops. A missing port or a controller that
+        does not answer is reported as the servo's status, never raised: the senses go on.
+        Asking again for the same port, protocol and joints keeps the link as it is."""
+        from servant_core.servo.link import ServoLink
+
+        spec = (port, protocol, tuple(joints))
+        if spec == self._arm_spec and self._link is not None:
+            return
+        self._close_arm()
+        if not port:
+            self.set_arm(None, "servo: no serial port set; choose the arm's port in Settings (s)")
+            return
+        try:
+            link = ServoLink.open(port, protocol, list(joints))
+        except ServantError as error:
+            self.set_arm(None, str(error))
+            return
+        self._arm_spec = spec
+        self.set_arm(link)
+
+    def _close_arm(self) -> None:
+        """Disarm and close the link `connect_arm` opened, if any."""
+        if self._arm_spec is None:
+            return
+        link, self._link, self._arm_spec = self._link, None, None
+        if link is not None:
+            try:
+                link.disarm()
+            finally:
+                link.close()
+
+    def apply_settings(self, settings: Any) -> None:
+        """Use the user's settings (`servant_core.settings.Settings`) from now on: the fusion
+        windows (the current window starts afresh), the confidence threshold, and the arm's port,
+        protocol and joints (reconnected only when they changed). Call it off the UI thread: a
+        controller that does not answer takes up to a second to say so."""
+        config = fusion_config(settings)
+        with self._lock:
+            if hasattr(self.fusion, "config"):  # the policies of servant_core.fusion
+                policy: Any = type(self.fusion)
+                self.fusion = policy(config)
+            self.confidence_threshold = float(settings.confidence_threshold)
+            state = self.fusion.state(self.clock())
+        self._emit(state)
+        self.connect_arm(settings.serial_port, settings.protocol, settings.joints)
 
     def arm(self) -> None:
         """Allow the arm to move (delegates to the link); ServantError if no arm is attached."""
@@ -533,14 +607,28 @@ class Engine:
     def _emit_arm_state(self) -> None:
         state = self._link.status() if self._link is not None else None
         if isinstance(state, ArmState):
-            self._emit(state)
+            # the link stamps its own clock; events carry the engine's
+            self._emit(dataclasses.replace(state, t=self.clock()))
 
     def _act(self, scene: str) -> None:
         link, pose_for, pool = self._link, self._pose_for, self._arm_pool
-        if link is None or pose_for is None or not link.armed:
+        if link is None or not link.armed:
+            return
+        if pose_for is None:
+            self._emit(Notice(self.clock(), NO_POSE))
             return
         scores = self.latest_scores()
         confidence = 100.0 * min(scores[sense].get(scene, 0.0) for sense in ("acoustic", "visual"))
+        threshold = self.confidence_threshold
+        if threshold is not None and confidence < threshold:
+            self._emit(
+                Notice(
+                    self.clock(),
+                    f"arm stays put: {scene} is only {confidence:.0f} % sure, under the "
+                    f"{threshold:g} % threshold (Settings)",
+                )
+            )
+            return
         try:
             pose = pose_for(scene, scores, confidence)
         except ServantError as error:
@@ -778,23 +866,37 @@ def build_demo_engine(
     fusion: FusionPolicy | None = None,
     library_root: str | Path | None = None,
     arm: bool = True,
+    paper: bool = False,
 ) -> Engine:
-    """The built-in demo: the paper's recognisers trained on freshly synthesised scenes (a couple
-    of seconds), then the synthesised walk (see `servant_core.demo.scenes`). With `arm`, an
-    emulated arm (`servant_core.demo.arm`), disarmed, that the engine closes when it stops.
+    """The built-in demo: recognisers trained on freshly synthesised scenes (a couple of seconds),
+    then the synthesised walk (see `servant_core.demo.scenes`). By default Servant at its best:
+    `codebook` and `bovw` with percentages, and the parallel fusion policy; `paper` gives the
+    paper's recognisers (eqs. 1 and 2) and its sequential 30 s / 20 s policy. With `arm`, an
+    emulated arm (`servant_core.demo.arm`), disarmed, that the engine closes when it stops. With
+    `library_root`, the demo's training scenes are written there as a scene library (the demo's
+    own throw-away space: see `servant_core.demo.space`), for the library screen and retrains.
 
     `realtime=False` runs the walk as fast as possible on a `ManualClock` (pass your own to read
     it), so events — times included — are the same on every run: use `engine.run_until(t)` for a
     thread-free deterministic run, or `start()` to stream them. With `realtime=True` the walk
     plays at real speed on `clock` (default: monotonic time).
     """
-    from servant_core.demo.scenes import DemoCamera, demo_audio, train_demo_recognisers
+    from servant_core.demo.scenes import (
+        DemoCamera,
+        demo_audio,
+        train_demo_recognisers,
+        write_demo_library,
+    )
 
     if not realtime:
         clock = clock if isinstance(clock, ManualClock) else ManualClock()
     clock = clock or MonotonicClock()
-    acoustic, visual = train_demo_recognisers(seed)
+    acoustic, visual = train_demo_recognisers(seed, paper=paper)
+    if library_root is not None:
+        write_demo_library(library_root, seed)
     audio = demo_audio(seed, realtime=realtime, clock=clock if not realtime else None)
+    if fusion is None:
+        fusion = SequentialFusion() if paper else POLICIES["parallel"]()
     engine = Engine(
         audio=audio,
         camera=DemoCamera(clock, seed),
@@ -815,6 +917,27 @@ def build_demo_engine(
     return engine
 
 
+def fusion_config(settings: Any) -> FusionConfig:
+    """The fusion windows of the user's settings (`servant_core.settings.Settings`)."""
+    return FusionConfig(
+        acoustic_window_s=settings.acoustic_window_s,
+        confirm_window_s=settings.confirm_window_s,
+        pictures_needed=settings.pictures_needed,
+        picture_interval_s=settings.picture_interval_s,
+    )
+
+
+def pose_for_taught(learner: Any) -> PoseFor:
+    """The engine's action hook for an `ActionLearner`. The engine applies the confidence
+    threshold of the settings (which the user may change while it runs) before it asks for a
+    pose, so the learner's own, fixed when it was trained, is not applied a second time."""
+
+    def pose_for(scene: str, scores: dict[str, dict[str, float]], confidence: float) -> Pose:
+        return learner.pose_for(scene, scores, 100.0)
+
+    return pose_for
+
+
 @dataclass(frozen=True)
 class LiveSettings:
     """What `build_live_engine` needs; every field has a sensible default.
@@ -823,6 +946,11 @@ class LiveSettings:
     `model_path`: where retrains and fold-ins are saved (None: back to `model`).
     `microphone`: device index or name (None: the default input); `rate`: None for its default.
     `camera`: index, video file or image-sequence pattern (None: no camera).
+    `user`: the user's settings (`servant_core.settings.Settings`: fusion windows, confidence
+    threshold, the arm's port, protocol and joints); None: the defaults, and no arm.
+    `policy`: the fusion policy's name (`servant_core.fusion.POLICIES`).
+    `learner`: the action learner file teach mode trains (None: `default_learner_path()`, if
+    there is one yet).
     """
 
     model: str | Path | None = None
@@ -832,25 +960,42 @@ class LiveSettings:
     use_microphone: bool = True
     camera: int | str | None = 0
     library_root: str | Path | None = None
+    user: Any = None
+    policy: str = "parallel"
+    learner: str | Path | None = None
 
 
 def build_live_engine(
     settings: LiveSettings | None = None, fusion: FusionPolicy | None = None
 ) -> Engine:
-    """An engine on the live devices. A missing microphone or camera is reported when the engine
-    starts (`DeviceStatus(ok=False)`), never raised: the engine runs on what there is."""
+    """An engine on the live devices and the arm of the user's settings, with the poses taught
+    in teach mode. A missing microphone, camera or arm, or no poses taught yet, is reported when
+    the engine starts (`DeviceStatus(ok=False)`, `Notice`), never raised: the engine runs on
+    what there is. A model file that cannot be read is raised (ServantError)."""
+    from servant_core.actions.learner import ActionLearner, default_learner_path
     from servant_core.capture.camera import Camera
     from servant_core.capture.microphone import Microphone
     from servant_core.modelfile import load_model
+    from servant_core.settings import Settings
 
     settings = settings or LiveSettings()
+    user = settings.user or Settings()
     models = load_model(settings.model) if settings.model else {}
-    return Engine(
+    engine = Engine(
         audio=Microphone(settings.microphone, settings.rate) if settings.use_microphone else None,
         camera=Camera(settings.camera) if settings.camera is not None else None,
         acoustic=models.get("acoustic"),
         visual=models.get("visual"),
-        fusion=fusion,
+        fusion=fusion or POLICIES[settings.policy](fusion_config(user)),
         library_root=settings.library_root,
         model_path=settings.model_path or settings.model,
+        confidence_threshold=user.confidence_threshold,
     )
+    engine.connect_arm(user.serial_port, user.protocol, user.joints)
+    learner_file = Path(settings.learner or default_learner_path())
+    if settings.learner is not None or learner_file.is_file():
+        try:
+            engine.set_action_learner(pose_for_taught(ActionLearner.load(learner_file)))
+        except ServantError as error:
+            engine.note(f"{error}; the arm stays put until a pose is taught again")
+    return engine

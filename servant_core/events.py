@@ -107,6 +107,14 @@ class ArmState:
 
 
 @dataclass(frozen=True)
+class Notice:
+    """Something the user should know that is not a fault: what to do next, why the arm stays."""
+
+    t: float
+    message: str  # one line
+
+
+@dataclass(frozen=True)
 class ErrorEvent:
     t: float
     message: str  # one line: what is wrong and what to do
@@ -122,5 +130,6 @@ Event = (
     | UnknownScene
     | DeviceStatus
     | ArmState
+    | Notice
     | ErrorEvent
 )

@@ -21,12 +21,13 @@ from servant_core.events import (
     Decision,
     DeviceStatus,
     ErrorEvent,
+    Notice,
     SpectrumFrame,
     UnknownScene,
     VisualPrediction,
 )
 from servant_core.storage import data_dir
-from servant_tui.messages import EngineEvent, SpectrumUpdate
+from servant_tui.messages import EngineEvent, SpectrumUpdate, TrainingDone
 from servant_tui.screens.dialogs import HelpScreen, LabelPrompt
 from servant_tui.screens.live import LiveScreen, device_message
 from servant_tui.widgets.text import clock
@@ -45,6 +46,12 @@ class EngineLike(Protocol):
 
 def default_library_root() -> Path:
     return data_dir() / "library"
+
+
+# How often an unknown place may interrupt the wearer with a question, at most; one that the
+# wearer skips keeps quiet for longer. A place heard while teaching or editing is only logged.
+PROMPT_EVERY_S = 60.0
+PROMPT_AFTER_SKIP_S = 300.0
 
 
 class ServantApp(App[None]):
@@ -73,12 +80,48 @@ class ServantApp(App[None]):
         self.library_root = (
             library_root or getattr(engine, "library_root", None) or default_library_root()
         )
-        self.settings = settings
+        self._settings = settings
         self.arm_state: ArmState | None = None
-        self.known_scenes: set[str] = set()
+        self.seen_scenes: set[str] = set()
         self.live = LiveScreen()
         self._prompt_open = False
+        self._quiet_until: float | None = None  # engine time before which no place is asked about
+        self._noticed: set[str] = set()
         engine.subscribe(self._from_engine)
+
+    @property
+    def settings(self) -> Any:
+        """The user's settings (`servant_core.settings.Settings`), loaded by the first screen
+        that needs them. Setting them (the Settings screen, after saving) hands them to the
+        engine: fusion windows, confidence threshold and the arm's port reach the live engine."""
+        return self._settings
+
+    @settings.setter
+    def settings(self, value: Any) -> None:
+        self._settings = value
+        if value is not None and hasattr(self.engine, "apply_settings"):
+            self.apply_settings(value)
+
+    @work(thread=True, exclusive=True, group="apply-settings", exit_on_error=False)
+    def apply_settings(self, settings: Any) -> None:
+        self.engine.apply_settings(settings)
+
+    @property
+    def known_scenes(self) -> set[str]:
+        """The scenes the engine's recognisers know, and any it was heard or seen to name."""
+        known = set(self.seen_scenes)
+        for role in ("acoustic", "visual"):
+            known.update(str(s) for s in getattr(getattr(self.engine, role, None), "scenes_", []))
+        return known
+
+    @on(TrainingDone)
+    def _use_taught_poses(self, message: TrainingDone) -> None:
+        """Teach mode trained the action learner: the arm acts on its poses from now on."""
+        attach = getattr(self.engine, "set_action_learner", None)
+        if attach is not None and message.learner is not None:
+            from servant_core.engine import pose_for_taught
+
+            attach(pose_for_taught(message.learner))
 
     # -- the engine side -------------------------------------------------------------------------
 
@@ -120,12 +163,15 @@ class ServantApp(App[None]):
                 self.refresh_bindings()
                 self.log_line(event.t, self._arm_line(event))
         elif isinstance(event, (AcousticPrediction, VisualPrediction)) and event.scene:
-            self.known_scenes.add(event.scene)
+            self.seen_scenes.add(event.scene)
         line = self._log_text(event)
         if line:
             self.log_line(event.t, line)
         if isinstance(event, ErrorEvent):
             self.notify(event.message, title="Servant", severity="error")
+        elif isinstance(event, Notice) and event.message not in self._noticed:
+            self._noticed.add(event.message)  # said once as a notification; always in the log
+            self.notify(event.message, title="Servant", timeout=10)
         elif isinstance(event, DeviceStatus) and not event.ok:
             self.notify(f"{event.device}: {device_message(event)}", severity="warning")
         elif isinstance(event, UnknownScene):
@@ -145,6 +191,8 @@ class ServantApp(App[None]):
             return f"[yellow]{escape(event.line)}[/]"
         if isinstance(event, (AcousticPrediction, VisualPrediction)):
             verb = "hears" if isinstance(event, AcousticPrediction) else "sees"
+            if event.scene is None:  # a confidence in no scene says nothing
+                return f"{verb} {place(None)}"
             confidence = confidence_text(event.confidence, event.confidence_unit)
             return f"{verb} {escape(place(event.scene))} ({confidence})"
         if isinstance(event, UnknownScene):
@@ -155,6 +203,8 @@ class ServantApp(App[None]):
             return f"[{style}]{event.device}: {escape(device_message(event))}[/]"
         if isinstance(event, ErrorEvent):
             return f"[bold red]{escape(event.message)}[/]"
+        if isinstance(event, Notice):
+            return f"[cyan]{escape(event.message)}[/]"
         return None
 
     @staticmethod
@@ -180,12 +230,17 @@ class ServantApp(App[None]):
     # -- open set: ask the user to name a place ---------------------------------------------------
 
     def _ask_label(self, event: UnknownScene) -> None:
-        if self._prompt_open:
+        """Ask the wearer to name an unknown place, unless a question is open, another screen
+        (teach mode, the library, settings) is in front, or one was asked or skipped lately."""
+        if self._prompt_open or self.screen is not self.live:
+            return
+        if self._quiet_until is not None and event.t < self._quiet_until:
             return
         self._prompt_open = True
 
         def answered(scene: str | None) -> None:
             self._prompt_open = False
+            self._quiet_until = event.t + (PROMPT_EVERY_S if scene else PROMPT_AFTER_SKIP_S)
             if scene:
                 self.label_unknown(event.window_id, scene)
 

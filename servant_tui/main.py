@@ -14,8 +14,9 @@ from typing import Any
 
 from servant_core.cli import build_parser as build_core_parser
 from servant_core.cli import run_handler
-from servant_core.cli.live import live_settings
-from servant_core.engine import build_demo_engine, build_live_engine
+from servant_core.cli.live import build_run_engine
+from servant_core.demo.space import throwaway_space
+from servant_core.engine import build_demo_engine
 from servant_core.errors import ServantError
 
 
@@ -41,11 +42,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     headless = getattr(args, "headless", False)
     if args.command is None or (args.command == "run" and not headless and not args.list_devices):
-        return run_tui(
-            lambda: build_live_engine(live_settings(args if args.command else None)), "live"
-        )
+        return run_tui(lambda: build_run_engine(args if args.command else None), "live")
     if args.command == "demo" and not headless and not args.fast:
-        return run_tui(lambda: build_demo_engine(args.seed), "demo")
+        with throwaway_space() as space:
+            print(
+                "servant: training the demo's recognisers on synthesised scenes…", file=sys.stderr
+            )
+            return run_tui(
+                lambda: build_demo_engine(
+                    args.seed, paper=args.paper, library_root=space / "library"
+                ),
+                "demo",
+            )
     return run_handler(args)
 
 

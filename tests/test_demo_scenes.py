@@ -18,6 +18,7 @@ from servant_core.demo.scenes import (
     synth_window,
     train_demo_recognisers,
     training_set,
+    walk_length,
 )
 from servant_core.engine import build_demo_engine
 from servant_core.events import AcousticPrediction, Decision, VisualPrediction
@@ -112,20 +113,42 @@ def test_walk_is_deterministic_and_shows_detections_mismatch_and_no_scene():
     assert segment_at(start).sound == "street" and segment_at(start).sight == "coffee"
 
 
-def test_servant_demo_headless_prints_the_papers_lines():
+def demo_lines(*options: str) -> list[str]:
     result = subprocess.run(
-        [sys.executable, "-m", "servant_tui", "demo", "--headless", "--fast", "--duration", "30"],
+        [sys.executable, "-m", "servant_tui", "demo", "--headless", "--fast", *options],
         capture_output=True,
         text=True,
         cwd=REPO,
         timeout=120,
     )
     assert result.returncode == 0, result.stderr
-    lines = result.stdout.splitlines()
+    return result.stdout.splitlines()
+
+
+def test_servant_demo_paper_prints_the_papers_lines():
+    lines = demo_lines("--paper", "--duration", "30")
     assert any(line.endswith("microphone ok: demo sound: listening at 16000 Hz") for line in lines)
     detected = [line for line in lines if "CoffeeScene detected  confidence" in line]
     assert detected and detected[0].startswith("[   9.")  # 5 s window + 3 pictures 2 s apart
+    assert "%" not in detected[0]  # the average of eq. 1 and eq. 2 is no percentage
     assert any("heard gym" in line for line in lines)
+
+
+def test_servant_demo_shows_percentages_and_every_scene_in_every_loop():
+    """By default the demo shows the methods beyond the paper: percentages a newcomer can read,
+    and each of its places detected again on every pass of the walk (95 s)."""
+    lines = demo_lines("--duration", str(3 * walk_length()))
+    decisions = [line for line in lines if "Scene detected  confidence" in line]
+    assert decisions and all(line.endswith(" %") for line in decisions)
+    heard = [line for line in lines if " heard " in line]
+    assert heard and all(line.endswith(" %") or "unknown" in line for line in heard)
+    for loop in range(3):
+        found = set()
+        for line in decisions:
+            t = float(line[1:8])
+            if loop * walk_length() <= t < (loop + 1) * walk_length():
+                found.add(line.split("]")[1].split("Scene")[0].strip().lower())
+        assert found == set(SCENES), (loop, found)
 
 
 def test_servant_run_headless_on_a_video_camera_without_microphone(tmp_path):

@@ -12,6 +12,10 @@ import numpy as np
 
 from servant_core.errors import ServantError
 
+# OpenCV's own warnings ("can't open camera by index") go straight to the terminal, over the
+# application's screen; a camera that cannot be opened is said in one line of ours instead.
+cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+
 
 def parse_camera(spec: int | str) -> int | str:
     """ "0" is camera index 0; anything else is a video file or image pattern (img_%03d.png)."""

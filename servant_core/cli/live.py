@@ -17,6 +17,7 @@ import time
 from typing import Any
 
 from servant_core.engine import Engine, LiveSettings, build_demo_engine, build_live_engine
+from servant_core.errors import ServantError
 from servant_core.event_text import confidence_text, place
 from servant_core.events import (
     AcousticPrediction,
@@ -25,38 +26,85 @@ from servant_core.events import (
     DeviceStatus,
     ErrorEvent,
     Event,
+    Notice,
     UnknownScene,
     VisualPrediction,
 )
 from servant_core.storage import default_model_file
 
+RUN_DESCRIPTION = """Recognise the scene from the live microphone and camera and, once armed, move
+the arm to the pose taught for it. Devices, the arm's port and joints, the fusion windows and the
+confidence threshold come from the settings file (the terminal app's Settings, key s); the options
+below override them for this run. Without --headless the terminal app opens."""
+
+DEMO_DESCRIPTION = """The built-in demo: a walk through a coffee shop, a gym and a street, all
+synthesised, with an emulated arm; no microphone, camera or arm needed. What you teach or record
+in the demo goes to a temporary folder, deleted when it ends."""
+
 
 def register(subparsers: Any) -> None:
+    from servant_core.fusion import POLICIES
+    from servant_core.settings import PROTOCOLS
+
     run = subparsers.add_parser(
-        "run", help="recognise scenes from the live microphone and camera", description=__doc__
+        "run",
+        help="recognise scenes from the live microphone and camera, and move the arm",
+        description=RUN_DESCRIPTION,
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     run.add_argument(
         "--model",
-        help="model file from `servant train`; retrains are saved back to it (default: the one "
-        "teach mode saved in the data dir, if any, else senses only)",
+        help="model file from `servant train`; what you teach is saved back to it (default: the "
+        "model teach mode saved, if any)",
     )
-    run.add_argument("--mic", help="input device index or name (default: the system's default)")
+    run.add_argument(
+        "--mic",
+        help="input device index or name (default: Settings, else the "
+        "system's default input; see --list-devices)",
+    )
     run.add_argument("--rate", type=int, help="sample rate in Hz (default: the device's own)")
     run.add_argument("--no-mic", action="store_true", help="do not listen")
-    run.add_argument("--camera", default="0", help="camera index, video file or image pattern")
+    run.add_argument(
+        "--camera", help="camera index, video file or image pattern (default: Settings, else 0)"
+    )
     run.add_argument("--no-camera", action="store_true", help="do not look")
+    run.add_argument(
+        "--port", help="the arm's serial port (default: Settings; see `servant servo list-ports`)"
+    )
+    run.add_argument(
+        "--protocol", choices=PROTOCOLS, help="the arm's controller (default: Settings)"
+    )
+    run.add_argument(
+        "--arm",
+        action="store_true",
+        help="arm the arm at once, so that detected scenes move it (in the app: key a); "
+        "without it the arm never moves",
+    )
+    run.add_argument(
+        "--policy",
+        choices=sorted(POLICIES),
+        default="parallel",
+        help="fusion: `sequential` is the paper's 30 s / 20 s rule",
+    )
     run.add_argument("--list-devices", action="store_true", help="list input devices and exit")
     _common(run)
     run.set_defaults(handler=run_live)
 
     demo = subparsers.add_parser(
         "demo",
-        help="the built-in demo scenes (no microphone or camera needed)",
-        description=__doc__,
+        help="the built-in demo scenes (no microphone, camera or arm needed)",
+        description=DEMO_DESCRIPTION,
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     demo.add_argument("--seed", type=int, default=0, help="seed of the synthesised scenes")
     demo.add_argument(
-        "--fast", action="store_true", help="as fast as possible, on a simulated clock"
+        "--paper",
+        action="store_true",
+        help="the paper's own recognisers (eqs. 1 and 2) and its sequential 30 s / 20 s fusion, "
+        "instead of the methods beyond it",
+    )
+    demo.add_argument(
+        "--fast", action="store_true", help="as fast as possible on a simulated clock (headless)"
     )
     _common(demo)
     demo.set_defaults(handler=run_demo)
@@ -77,44 +125,66 @@ def run_live(args: argparse.Namespace) -> int:
             rate = f"{device.channels} ch, {device.default_rate} Hz"
             print(f"{mark} {device.index:3d}  {device.name}  ({rate})")
         return 0
-    return _run(build_live_engine(live_settings(args)), args)
+    return _run(build_run_engine(args), args)
+
+
+def build_run_engine(args: argparse.Namespace | None = None) -> Engine:
+    """The live engine for `servant run ARGS` (None: `servant` alone), armed if `--arm` was given;
+    ServantError when the settings or the model cannot be read, or `--arm` finds no arm."""
+    engine = build_live_engine(live_settings(args))
+    if args is not None and args.arm:
+        try:
+            engine.arm()
+        except ServantError as error:
+            engine.stop()
+            raise ServantError(f"{error} (--arm needs an arm that answers)") from error
+    return engine
 
 
 def live_settings(args: argparse.Namespace | None = None) -> LiveSettings:
-    """`servant run`'s options; None (`servant` alone): the devices chosen in Settings.
+    """The user's settings file with `servant run`'s options over it; None (`servant` alone):
+    the settings file alone.
 
     Without `--model`, the model that teach mode and the library screen last saved is loaded
     (`default_model_file()`, if there is one yet) and retrains and fold-ins are saved back to it.
     """
+    from servant_core.settings import load_settings
+
+    user = load_settings()
     default = default_model_file()
     taught = default if default.is_file() else None
+    camera = user.camera if user.camera is not None else 0
     if args is None:
-        from servant_core.settings import load_settings
-
-        chosen = load_settings()
         return LiveSettings(
-            model=taught,
-            model_path=default,
-            microphone=chosen.audio_device,
-            camera=chosen.camera if chosen.camera is not None else 0,
+            model=taught, model_path=default, microphone=user.audio_device, camera=camera, user=user
         )
+    changes = {"serial_port": args.port, "protocol": args.protocol}
+    user = dataclasses.replace(user, **{k: v for k, v in changes.items() if v is not None})
     return LiveSettings(
         model=args.model or taught,
         model_path=args.model or default,
-        microphone=args.mic,
+        microphone=args.mic if args.mic is not None else user.audio_device,
         rate=args.rate,
         use_microphone=not args.no_mic,
-        camera=None if args.no_camera else args.camera,
+        camera=None if args.no_camera else (args.camera if args.camera is not None else camera),
+        user=user,
+        policy=args.policy,
     )
 
 
 def run_demo(args: argparse.Namespace) -> int:
-    engine = build_demo_engine(args.seed, realtime=not args.fast)
-    if args.fast:
-        engine.subscribe(_printer(args.json))
-        engine.run_until(args.duration if args.duration is not None else 95.0)
-        return 0
-    return _run(engine, args)
+    from servant_core.demo.space import throwaway_space
+
+    with throwaway_space() as space:
+        engine = build_demo_engine(
+            args.seed, realtime=not args.fast, paper=args.paper, library_root=space / "library"
+        )
+        if args.fast:
+            engine.subscribe(_printer(args.json))
+            engine.run_until(args.duration if args.duration is not None else 95.0)
+            engine.stop()
+            return 0
+        return _run(engine, args)
 
 
 def _run(engine: Engine, args: argparse.Namespace) -> int:
@@ -148,15 +218,20 @@ def _event_line(event: Event) -> str | None:
         confidence = confidence_text(event.confidence, event.confidence_unit)
         if isinstance(event, Decision):
             return f"{at} {event.line}  confidence {confidence}"
-        if isinstance(event, AcousticPrediction):
-            return f"{at} heard {place(event.scene)}  acoustic confidence {confidence}"
-        return f"{at} saw {place(event.scene)}  visual confidence {confidence}"
+        verb, sense = (
+            ("heard", "acoustic") if isinstance(event, AcousticPrediction) else ("saw", "visual")
+        )
+        if event.scene is None:  # a confidence in no scene says nothing
+            return f"{at} {verb} {place(None)}"
+        return f"{at} {verb} {place(event.scene)}  {sense} confidence {confidence}"
     if isinstance(event, UnknownScene):
         return f"{at} unknown {event.sense} ({event.window_id}), nearest: {event.nearest_scene}"
     if isinstance(event, DeviceStatus):
         return f"{at} {event.device} {'ok' if event.ok else 'PROBLEM'}: {event.message}"
     if isinstance(event, ErrorEvent):
         return f"{at} error: {event.message}"
+    if isinstance(event, Notice):
+        return f"{at} note: {event.message}"
     if isinstance(event, ArmState):
         return f"{at} arm {'armed' if event.armed else 'disarmed'} {event.angles}"
     return None

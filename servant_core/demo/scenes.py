@@ -19,14 +19,19 @@ from __future__ import annotations
 import itertools
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
+import cv2
 import numpy as np
 
-from servant_core.audio import DEFAULT_WINDOW_SECONDS
+from servant_core.audio import DEFAULT_WINDOW_SECONDS, write_wav
 from servant_core.capture.replay import Clip, PacedAudio
 from servant_core.demo.audio_synth import DEMO_RATE, SCENE_SOUNDS
 from servant_core.demo.picture_synth import SCENE_PICTURES
+from servant_core.recognisers import make_recogniser
 from servant_core.recognisers.paper import PaperAcousticRecogniser, PaperVisualRecogniser
+from servant_core.storage import atomic_write_bytes
 
 SCENES = ("coffee", "gym", "street")
 TRAIN, WALK_STREAM = 1, 2  # the first seed word after the user's seed: which stream of randomness
@@ -101,18 +106,50 @@ def training_set(
     return np.stack(windows), window_scenes, pictures, picture_scenes
 
 
+def demo_recognisers(seed: int = 0, *, paper: bool = True) -> tuple[Any, Any]:
+    """Unfitted recognisers for the demo: the paper's (`paper`), or the methods beyond it.
+
+    `bovw` goes without its LDA step here: a dozen synthesised pictures per scene are separated
+    perfectly by it, which leaves no spread to judge a new picture by (every one is "unknown").
+    """
+    if paper:
+        return (
+            PaperAcousticRecogniser(rate=DEMO_RATE, random_state=seed),
+            PaperVisualRecogniser(random_state=seed),
+        )
+    return (
+        make_recogniser("audio", "codebook", rate=DEMO_RATE, random_state=seed),
+        make_recogniser("image", "bovw", discriminant=False, random_state=seed),
+    )
+
+
 def train_demo_recognisers(
-    seed: int = 0, windows_per_scene: int = 6, pictures_per_scene: int = 6
-) -> tuple[PaperAcousticRecogniser, PaperVisualRecogniser]:
-    """The paper's two recognisers, fitted on freshly synthesised scenes (a second or two)."""
+    seed: int = 0, windows_per_scene: int = 6, pictures_per_scene: int = 6, *, paper: bool = True
+) -> tuple[Any, Any]:
+    """The demo's two recognisers (see `demo_recognisers`), fitted on freshly synthesised scenes
+    (a second or two)."""
     windows, window_scenes, pictures, picture_scenes = training_set(
         seed, windows_per_scene, pictures_per_scene
     )
-    acoustic = PaperAcousticRecogniser(rate=DEMO_RATE, random_state=seed)
+    acoustic, visual = demo_recognisers(seed, paper=paper)
     acoustic.fit(acoustic.featurize(windows), window_scenes)
-    visual = PaperVisualRecogniser(random_state=seed)
     visual.fit(visual.featurize(pictures), picture_scenes)
     return acoustic, visual
+
+
+def write_demo_library(root: str | Path, seed: int = 0) -> Path:
+    """The demo's training scenes as a scene library under `root` (WAV windows and PNG pictures,
+    as teach mode writes them), so that the library screen shows them and a retrain learns them
+    again."""
+    root = Path(root)
+    windows, window_scenes, pictures, picture_scenes = training_set(seed)
+    for i, (window, scene) in enumerate(zip(windows, window_scenes, strict=True)):
+        write_wav(root / scene / f"demo-{i:02d}.wav", window, DEMO_RATE)
+    for i, (picture, scene) in enumerate(zip(pictures, picture_scenes, strict=True)):
+        ok, png = cv2.imencode(".png", picture)
+        if ok:
+            atomic_write_bytes(root / scene / f"demo-{i:02d}.png", png.tobytes())
+    return root
 
 
 def walk_clips(seed: int = 0, walk: tuple[Segment, ...] = WALK) -> Iterator[Clip]:
