@@ -107,11 +107,7 @@ def training_set(
 
 
 def demo_recognisers(seed: int = 0, *, paper: bool = True) -> tuple[Any, Any]:
-    """Unfitted recognisers for the demo: the paper's (`paper`), or the methods beyond it.
-
-    `bovw` goes without its LDA step here: a dozen synthesised pictures per scene are separated
-    perfectly by it, which leaves no spread to judge a new picture by (every one is "unknown").
-    """
+    """Unfitted recognisers for the demo: the paper's (`paper`), or the methods beyond it."""
     if paper:
         return (
             PaperAcousticRecogniser(rate=DEMO_RATE, random_state=seed),
@@ -119,7 +115,7 @@ def demo_recognisers(seed: int = 0, *, paper: bool = True) -> tuple[Any, Any]:
         )
     return (
         make_recogniser("audio", "codebook", rate=DEMO_RATE, random_state=seed),
-        make_recogniser("image", "bovw", discriminant=False, random_state=seed),
+        make_recogniser("image", "bovw", random_state=seed),
     )
 
 

@@ -31,6 +31,10 @@ from servant_core.recognisers.base import (
 )
 
 MIN_CLUSTER_ROWS = 8
+# The LDA step needs this many training rows of every scene. With fewer (a first teach session:
+# a handful of pictures a scene) it separates the training rows perfectly, leaving no spread to
+# judge a new row by, and every new picture of a taught place would be "unknown".
+MIN_DISCRIMINANT_ROWS = 20
 
 
 @dataclass
@@ -200,9 +204,10 @@ class CentroidRecogniser:
         D = self._standardise(D)
         if self.discriminant:
             # A light linear step before the centroids: the directions that best separate the
-            # training scenes (shrunk LDA, stable with fewer rows than dimensions). It needs more
-            # rows than scenes; below that (a picture a scene) the descriptors stay as they are.
-            if len(D) > len(names):
+            # training scenes (shrunk LDA, stable with fewer rows than dimensions). Below
+            # MIN_DISCRIMINANT_ROWS rows of a scene the descriptors stay as they are.
+            _, counts = np.unique(np.asarray(scenes), return_counts=True)
+            if counts.min() >= MIN_DISCRIMINANT_ROWS:
                 lda = LinearDiscriminantAnalysis(solver="eigen", shrinkage="auto").fit(D, scenes)
                 self.projection_ = lda.scalings_[:, : len(lda.classes_) - 1]
             else:
