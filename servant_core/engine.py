@@ -576,8 +576,9 @@ class Engine:
     def apply_settings(self, settings: Any) -> None:
         """Use the user's settings (`servant_core.settings.Settings`) from now on: the fusion
         windows (the current window starts afresh), the confidence threshold, and the arm's port,
-        protocol and joints (reconnected only when they changed). Call it off the UI thread: a
-        controller that does not answer takes up to a second to say so."""
+        protocol and joints (reconnected only when they changed; an arm attached with `set_arm`,
+        like the demo's, stays). Call it off the UI thread: a controller that does not answer
+        takes up to a second to say so."""
         config = fusion_config(settings)
         with self._lock:
             if hasattr(self.fusion, "config"):  # the policies of servant_core.fusion
@@ -586,7 +587,8 @@ class Engine:
             self.confidence_threshold = float(settings.confidence_threshold)
             state = self.fusion.state(self.clock())
         self._emit(state)
-        self.connect_arm(settings.serial_port, settings.protocol, settings.joints)
+        if self._link is None or self._arm_spec is not None:  # not an arm given to `set_arm`
+            self.connect_arm(settings.serial_port, settings.protocol, settings.joints)
 
     def arm(self) -> None:
         """Allow the arm to move (delegates to the link); ServantError if no arm is attached."""
@@ -913,7 +915,7 @@ def build_demo_engine(
         engine.add_cleanup(emulator.stop)
         engine.add_cleanup(link.close)  # runs first: the link closes before its emulator
         engine.set_arm(link)
-        engine.set_action_learner(demo_learner().pose_for)
+        engine.set_action_learner(pose_for_taught(demo_learner()))
     return engine
 
 
@@ -928,12 +930,16 @@ def fusion_config(settings: Any) -> FusionConfig:
 
 
 def pose_for_taught(learner: Any) -> PoseFor:
-    """The engine's action hook for an `ActionLearner`. The engine applies the confidence
-    threshold of the settings (which the user may change while it runs) before it asks for a
-    pose, so the learner's own, fixed when it was trained, is not applied a second time."""
+    """The engine's action hook for an `ActionLearner`: the pose taught for the decided scene.
+
+    The learner is asked for the decided scene as a certainty (one-hot scores), not for the
+    senses' raw scores: those are never one-hot, and a wearer who taught "cup at chest height"
+    for the café wants that pose, not a blend with the street's. The engine has applied the
+    confidence threshold of the settings (which the user may change while it runs) before it
+    asks, so the learner's own, fixed when it was trained, is not applied a second time."""
 
     def pose_for(scene: str, scores: dict[str, dict[str, float]], confidence: float) -> Pose:
-        return learner.pose_for(scene, scores, 100.0)
+        return learner.pose_for(scene, None, 100.0)
 
     return pose_for
 

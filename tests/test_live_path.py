@@ -1,0 +1,292 @@
+"""The path a real wearer takes, not the demo's: live devices end to end, from empty data and
+config dirs (conftest gives every test its own).
+
+Real parts throughout: PortAudio through the virtual microphone (a PulseAudio null sink we play
+into, see test_microphone.py), a video file as the camera (cv2.VideoCapture), the project's own
+servo-controller emulator on a pty (pyserial), the settings file in the platformdirs config dir.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from servant_core.actions.learner import ActionLearner
+from servant_core.actions.records import TeachRecord, label_scores
+from servant_core.audio import write_wav
+from servant_core.cli import main as cli_main
+from servant_core.cli.live import build_run_engine, live_settings
+from servant_core.demo.audio_synth import DEMO_RATE
+from servant_core.demo.scenes import synth_picture, synth_window, write_demo_library
+from servant_core.engine import NO_MODEL, build_demo_engine
+from servant_core.events import ArmState, Decision, Notice
+from servant_core.fusion import FusionConfig
+from servant_core.servo.emulator import start_emulator
+from servant_core.settings import Settings, default_joints, save_settings
+from servant_tui.main import build_parser
+from tests.conftest import REPO
+from tests.test_microphone import play
+from tests.test_microphone import virtual_mic as virtual_mic  # a fixture
+
+# What the wearer taught: a cup at chest height in the café, the arm low in the street.
+POSES = {
+    "coffee": {"shoulder": 40.0, "elbow": 100.0, "gripper": 60.0},
+    "street": {"shoulder": 10.0, "elbow": 20.0, "gripper": 0.0},
+}
+SCENES = tuple(POSES)
+
+
+def expected_pulse(joint: str, angle: float) -> float:
+    j = next(j for j in default_joints() if j.name == joint)
+    share = (angle - j.min_angle) / (j.max_angle - j.min_angle)
+    return j.min_pulse_us + share * (j.max_pulse_us - j.min_pulse_us)
+
+
+def scene_sound(scene: str, path: Path, seconds: float = 40.0) -> Path:
+    """A synthesised recording of the scene (new randomness: never a training window)."""
+    windows = [synth_window(scene, np.random.default_rng([77, k])) for k in range(int(seconds / 5))]
+    return write_wav(path, np.concatenate(windows), DEMO_RATE)
+
+
+def scene_video(scene: str, path: Path, frames: int = 20) -> Path:
+    """A video file of the scene's pictures: the camera (cv2.VideoCapture reads it)."""
+    first = synth_picture(scene, np.random.default_rng([78, 0]))
+    height, width = first.shape[:2]
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 2.0, (width, height))
+    for k in range(frames):
+        writer.write(synth_picture(scene, np.random.default_rng([78, k])))
+    writer.release()
+    return path
+
+
+def teach(tmp_path: Path) -> Path:
+    """What a wearer has after teaching coffee and street: a model, teach records and the action
+    learner in the data dir (as `servant train` and teach mode leave them)."""
+    library = tmp_path / "library"
+    write_demo_library(library, seed=3)
+    for folder in library.iterdir():
+        if folder.name not in SCENES:
+            for file in folder.iterdir():
+                file.unlink()
+            folder.rmdir()
+    model = tmp_path / "model.npz"
+    argv = ["train", str(library), "-o", str(model), "--audio-method", "codebook"]
+    assert cli_main([*argv, "--image-method", "bovw"]) == 0
+    records = [TeachRecord(s, label_scores(s, SCENES), POSES[s], time.time()) for s in SCENES]
+    ActionLearner(max_iter=3000).fit(records).save()  # the default path, in the data dir
+    return model
+
+
+@pytest.fixture
+def emulator():
+    emulator, port = start_emulator("maestro")
+    yield emulator, port
+    emulator.stop()
+
+
+def test_servant_run_headless_moves_the_arm_to_the_taught_pose(
+    tmp_path,
+    virtual_mic,
+    emulator,  # noqa: F811
+):
+    """`servant run --headless --model M --port PTY --arm`: the street is heard through the
+    microphone and seen by the camera, and the arm takes the pose taught for the street."""
+    emu, port = emulator
+    model = teach(tmp_path)
+    video = scene_video("street", tmp_path / "street.avi")
+    player = play(scene_sound("street", tmp_path / "street.wav"))
+    try:
+        result = subprocess.run(
+            [sys.executable, "-m", "servant_tui", "run", "--headless", "--model", str(model)]
+            + ["--port", port, "--arm", "--camera", str(video), "--duration", "20"],
+            capture_output=True,
+            text=True,
+            cwd=REPO,
+            timeout=120,
+        )
+    finally:
+        player.kill()
+    assert result.returncode == 0, result.stderr
+    assert "StreetScene detected" in result.stdout, result.stdout
+    assert "arm armed" in result.stdout
+    for joint, angle in POSES["street"].items():
+        channel = next(j.channel for j in default_joints() if j.name == joint)
+        assert emu.pulse(channel) == pytest.approx(expected_pulse(joint, angle), abs=8.0), joint
+
+
+def test_the_arm_of_the_settings_is_attached_disarmed_and_moves_only_when_armed(emulator):
+    """Live mode used to leave the arm out (only the demo attached one)."""
+    emu, port = emulator
+    save_settings(Settings(serial_port=port))
+    engine = build_run_engine(None)
+    events: list = []
+    engine.subscribe(events.append)
+    try:
+        assert engine.status["servo"].ok, engine.status["servo"].message
+        assert engine._link is not None and not engine._link.armed
+        engine.arm()
+        assert any(isinstance(e, ArmState) and e.armed and e.connected for e in events)
+    finally:
+        engine.stop()
+    assert engine._link is None  # the engine closed the link it opened
+
+
+def test_servant_run_with_arm_but_no_arm_says_so_in_one_line():
+    save_settings(Settings(serial_port="/dev/does-not-exist"))
+    result = subprocess.run(
+        [sys.executable, "-m", "servant_tui", "run", "--headless", "--no-mic", "--no-camera"]
+        + ["--arm", "--duration", "0.2"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=60,
+    )
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("servant: error: ") and "--arm" in lines[0]
+
+
+def write_settings(**changes) -> None:
+    Settings(**changes)  # the values are valid settings
+    from servant_core.storage import config_dir
+
+    path = config_dir() / "settings.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({**Settings().to_json(), **changes}))
+
+
+@pytest.mark.parametrize("args", [None, ["run", "--no-mic", "--no-camera"]])
+def test_fusion_windows_and_confidence_threshold_of_the_settings_file_reach_the_engine(args):
+    write_settings(
+        acoustic_window_s=12.0,
+        confirm_window_s=8.0,
+        pictures_needed=2,
+        picture_interval_s=1.5,
+        confidence_threshold=85.0,
+    )
+    parsed = build_parser().parse_args(args) if args else None
+    engine = build_run_engine(parsed)
+    try:
+        assert engine.fusion.config == FusionConfig(12.0, 8.0, 2, 1.5)
+        assert engine.confidence_threshold == 85.0
+    finally:
+        engine.stop()
+
+
+def walk(settings: Settings | None, *, paper: bool) -> list:
+    """The demo's first 20 s, armed, with `settings` applied as the Settings screen does."""
+    engine = build_demo_engine(seed=0, realtime=False, paper=paper)
+    events: list = []
+    engine.subscribe(events.append)
+    if settings is not None:
+        engine.apply_settings(settings)
+    engine.arm()
+    engine.run_until(20.0)
+    engine.stop()
+    return events
+
+
+def first_coffee(events: list) -> float:
+    return next(e.t for e in events if isinstance(e, Decision) and e.scene == "coffee")
+
+
+def test_fusion_windows_saved_while_running_change_when_the_engine_decides():
+    """The paper's walk: 3 pictures confirm the café at 9 s; with 5 asked for in Settings, at
+    13 s (the 5 s window, then 4 more pictures 2 s apart)."""
+    assert first_coffee(walk(None, paper=True)) == pytest.approx(9.0, abs=0.6)
+    assert first_coffee(walk(Settings(pictures_needed=5), paper=True)) == pytest.approx(13, abs=0.6)
+
+
+def test_the_confidence_threshold_saved_while_running_decides_whether_the_arm_acts():
+    """The demo's decisions are 55-70 % sure: under a 95 % threshold the armed arm stays still
+    and says why; under 10 % it takes the café's pose."""
+    strict = walk(Settings(confidence_threshold=95.0), paper=False)
+    assert any(isinstance(e, Decision) and e.scene for e in strict)
+    assert any(isinstance(e, Notice) and "arm stays put" in e.message for e in strict)
+    assert not any(isinstance(e, ArmState) and e.target for e in strict)
+    lenient = walk(Settings(confidence_threshold=10.0), paper=False)
+    assert any(isinstance(e, ArmState) and e.target for e in lenient)
+
+
+def test_a_first_start_without_a_model_says_what_to_do():
+    result = subprocess.run(
+        [sys.executable, "-m", "servant_tui", "run", "--headless", "--no-mic", "--no-camera"]
+        + ["--duration", "0.3"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=60,
+    )
+    assert result.returncode == 0, result.stderr
+    assert f"note: {NO_MODEL}" in result.stdout
+    assert "teach mode, key t" in NO_MODEL and "servant train" in NO_MODEL
+
+
+def test_servant_run_reads_the_devices_and_port_of_the_settings_file(tmp_path):
+    write_settings(audio_device="7", camera=str(tmp_path / "clip.avi"), serial_port="/dev/ttyX")
+    given = live_settings(build_parser().parse_args(["run"]))
+    assert given.microphone == "7" and given.camera == str(tmp_path / "clip.avi")
+    assert given.user.serial_port == "/dev/ttyX"
+    over = live_settings(build_parser().parse_args(["run", "--port", "/dev/ttyY", "--mic", "2"]))
+    assert over.user.serial_port == "/dev/ttyY" and over.microphone == "2"
+
+
+def test_the_demo_touches_nothing_outside_its_temporary_space(tmp_path):
+    """The data and config dirs are paths under a plain file: anything written there fails, even
+    as root. The demo runs, records nothing there, and retrains on its own library."""
+    blocker = tmp_path / "not-a-folder"
+    blocker.write_text("")
+    env = {
+        **os.environ,
+        "SERVANT_DATA_DIR": str(blocker / "data"),
+        "SERVANT_CONFIG_DIR": str(blocker / "config"),
+        "HOME": str(tmp_path / "home"),
+    }
+    result = subprocess.run(
+        [sys.executable, "-m", "servant_tui", "demo", "--headless", "--fast", "--duration", "20"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env=env,
+        timeout=120,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "CoffeeScene detected" in result.stdout
+    assert not (tmp_path / "home").exists()
+    assert blocker.read_text() == ""
+
+
+def test_a_retrain_in_the_demo_learns_the_demo_scenes_again(tmp_path):
+    from servant_core.demo.space import throwaway_space
+    from servant_core.storage import data_dir
+
+    user_data = data_dir()
+    with throwaway_space() as space:
+        engine = build_demo_engine(seed=0, realtime=False, library_root=space / "library")
+        engine.retrain(space / "library")
+        events: list = []
+        engine.subscribe(events.append)
+        engine.run_until(45.0)  # the café, then the gym from 32 s
+        engine.stop()
+        assert data_dir() != user_data
+    assert data_dir() == user_data and not user_data.exists()
+    assert {e.scene for e in events if isinstance(e, Decision)} >= {"coffee", "gym"}
+
+
+def test_arm_states_carry_the_engines_time():
+    engine = build_demo_engine(seed=0, realtime=False)
+    events: list = []
+    engine.subscribe(events.append)
+    engine.run_until(3.0)
+    engine.arm()
+    engine.stop()
+    states = [e for e in events if isinstance(e, ArmState)]
+    assert states and all(0.0 <= e.t <= 3.5 for e in states), [e.t for e in states]
