@@ -195,7 +195,7 @@ class CentroidRecogniser:
         raise NotImplementedError
 
     def fit(self, X: np.ndarray, scenes: Sequence[str] | np.ndarray) -> Self:
-        names = check_training_scenes(scenes, len(X))
+        check_training_scenes(scenes, len(X))
         self._fit_codebooks(X)
         D = self.describe(X)
         self.mean_ = D.mean(axis=0)
