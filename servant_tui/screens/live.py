@@ -36,20 +36,28 @@ class DeviceBar(Static):
     def on_mount(self) -> None:
         self.update(self._render_statuses())
 
+    def on_resize(self) -> None:
+        self.update(self._render_statuses())
+
     def show_status(self, status: DeviceStatus) -> None:
         self.statuses[status.device] = status
         self.update(self._render_statuses())
 
     def _render_statuses(self) -> str:
+        """Each device gets a third of the line, its message cut short to fit (the log and the
+        notification have it whole): a long camera message must not push the servo off."""
+        room = max((self.size.width - 2) // len(DEVICES) - 3, 12)
         parts = []
         for device in DEVICES:
             status = self.statuses.get(device)
             if status is None:
                 parts.append(f"[dim]{device} …[/]")
-            elif status.ok:
-                parts.append(f"[green]{device} ✓[/] [dim]{escape(device_message(status))}[/]")
-            else:
-                parts.append(f"[bold red]{device} ✗[/] [red]{escape(device_message(status))}[/]")
+                continue
+            message = device_message(status)
+            if len(device) + 3 + len(message) > room:
+                message = message[: max(room - len(device) - 4, 0)] + "…"
+            mark, style, body = ("✓", "green", "dim") if status.ok else ("✗", "bold red", "red")
+            parts.append(f"[{style}]{device} {mark}[/] [{body}]{escape(message)}[/]")
         return "   ".join(parts)
 
 
@@ -96,6 +104,8 @@ class LiveScreen(Screen[None]):
             self.arm.border_title = "Arm · ARMED" if event.armed else "Arm"
         elif isinstance(event, DeviceStatus):
             self.devices.show_status(event)
+            if event.device == "servo":
+                self.arm.show_problem(None if event.ok else device_message(event))
         else:
             self.scene.show_event(event)
 

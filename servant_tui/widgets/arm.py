@@ -18,11 +18,17 @@ class ArmPane(Static):
     def __init__(self, *, id: str | None = None) -> None:
         super().__init__(id=id)
         self.state: ArmState | None = None
+        self.problem: str | None = None  # why there is no arm (the servo's status), if known
 
     def on_mount(self) -> None:
         self.update(self._render_state())
 
     def on_resize(self) -> None:
+        self.update(self._render_state())
+
+    def show_problem(self, message: str | None) -> None:
+        """Say why no arm is attached (None: the servo works again)."""
+        self.problem = message
         self.update(self._render_state())
 
     def show_state(self, state: ArmState) -> None:
@@ -36,6 +42,13 @@ class ArmPane(Static):
         table.add_column(no_wrap=True)
         table.add_column(no_wrap=True, justify="right")
         state = self.state
+        if self.problem and (state is None or not state.connected):
+            why = Table.grid(padding=(0, 1))
+            why.add_column(style="bold", no_wrap=True, min_width=8)
+            why.add_column()  # the reason wraps in a narrow pane
+            why.add_row("link", Text("○ no arm", "red"))
+            why.add_row("", Text(self.problem, "grey70"))
+            return why
         if state is None:
             table.add_row("link", Text("no arm state yet", "grey50"))
             return table
