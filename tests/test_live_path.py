@@ -290,3 +290,18 @@ def test_arm_states_carry_the_engines_time():
     engine.stop()
     states = [e for e in events if isinstance(e, ArmState)]
     assert states and all(0.0 <= e.t <= 3.5 for e in states), [e.t for e in states]
+
+
+def test_a_missing_camera_is_one_line_of_ours_not_opencvs_warnings():
+    """OpenCV printed `[ WARN:0@…] … can't open camera by index` over the app's title."""
+    result = subprocess.run(
+        [sys.executable, "-m", "servant_tui", "run", "--headless", "--no-mic", "--camera", "7"]
+        + ["--duration", "0.5"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=60,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "WARN" not in result.stderr and "VIDEOIO" not in result.stderr, result.stderr
+    assert "camera PROBLEM: camera 7: no such camera" in result.stdout
