@@ -62,12 +62,12 @@ async def test_teach_flow_from_scene_to_tested_pose(tmp_path, monkeypatch):
         await pilot.click("#again")
         await type_into(pilot, "#new-scene", "GymScene")
         await pilot.press("enter")
-        await teach_pose(pilot, screen, {"shoulder": "150", "elbow": "20", "wrist": "10"})
+        await teach_pose(pilot, screen, {"shoulder": "80", "elbow": "20", "wrist": "10"})
         await settle(pilot, lambda: screen.query_one("#samples", DataTable).row_count == 2)
         saved = records.load_records()
         assert [(r.scene, r.pose["shoulder"]) for r in saved] == [
             ("CoffeeScene", 30.0),
-            ("GymScene", 150.0),
+            ("GymScene", 80.0),
         ]
 
         screen.go("train")

@@ -136,3 +136,21 @@ class Confirm(ModalScreen[bool]):
     @on(Button.Pressed)
     def answer(self, event: Button.Pressed) -> None:
         self.dismiss(event.button.id == "yes")
+
+
+class UnsavedChanges(ModalScreen[str]):
+    """Leaving a form with unsaved edits: "save", "discard" or "keep" (editing)."""
+
+    BINDINGS = [Binding("escape", "dismiss('keep')", "Keep editing")]
+
+    def compose(self) -> ComposeResult:
+        with Vertical(id="unsaved", classes="dialog"):
+            yield Label("The settings have unsaved changes.")
+            with Horizontal(classes="buttons"):
+                yield Button("Save", id="save", variant="primary")
+                yield Button("Discard", id="discard", variant="error")
+                yield Button("Keep editing", id="keep")
+
+    @on(Button.Pressed)
+    def answer(self, event: Button.Pressed) -> None:
+        self.dismiss(event.button.id)

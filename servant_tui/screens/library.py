@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from rich.markup import escape
 from rich.table import Table
 from textual import on, work
 from textual.app import ComposeResult
@@ -18,6 +19,9 @@ from servant_core.evaluate import evaluate_audio
 from servant_core.library import SceneLibrary
 from servant_tui.messages import EvaluationDone, RetrainDone
 from servant_tui.screens.dialogs import Confirm, ScenePrompt
+from servant_tui.screens.secondary import HELP_AND_QUIT, ReportsWorkerErrors, with_progress
+from servant_tui.widgets.progress import OnProgress, WorkProgress
+from servant_tui.widgets.text import error_text
 
 
 def free_path(folder: Path, name: str) -> Path:
@@ -43,13 +47,14 @@ def evaluation_table(result: dict) -> Table:
     return table
 
 
-class LibraryScreen(Screen[None]):
+class LibraryScreen(ReportsWorkerErrors, Screen[None]):
     BINDINGS = [
         Binding("escape", "app.pop_screen", "Back"),
-        Binding("d", "delete", "Delete sample"),
-        Binding("r", "relabel", "Relabel sample"),
+        Binding("d", "delete", "Delete"),
+        Binding("r", "relabel", "Relabel"),
         Binding("R", "retrain", "Retrain"),
         Binding("e", "evaluate", "Evaluate"),
+        *HELP_AND_QUIT,
     ]
 
     def __init__(self) -> None:
@@ -65,6 +70,7 @@ class LibraryScreen(Screen[None]):
                 yield DataTable(id="scenes", cursor_type="row")
                 yield Static(id="evaluation")
             yield DataTable(id="samples", cursor_type="row")
+        yield WorkProgress(id="library-progress")
         yield Static(id="library-status")
         yield Footer()
 
@@ -82,6 +88,10 @@ class LibraryScreen(Screen[None]):
 
     def status(self, text: str) -> None:
         self.query_one("#library-status", Static).update(text)
+
+    def work_failed(self, group: str, error: BaseException) -> None:
+        self.query_one(WorkProgress).end(finished=False)
+        self.status(f"[red]{group} failed:[/] {escape(error_text(error))}")
 
     def rescan(self) -> None:
         scenes = self.query_one("#scenes", DataTable)
@@ -134,7 +144,13 @@ class LibraryScreen(Screen[None]):
 
         def confirmed(yes: bool | None) -> None:
             if yes:
-                path.unlink(missing_ok=True)
+                try:
+                    path.unlink(missing_ok=True)
+                except OSError as error:
+                    self.app.report_error(
+                        ServantError(f"{path}: cannot delete ({error.strerror}); check its folder")
+                    )
+                    return
                 self.app.log_line(None, f"deleted {path}")
                 self.rescan()
 
@@ -154,9 +170,15 @@ class LibraryScreen(Screen[None]):
                 )
                 return
             folder = self.root / scene
-            folder.mkdir(parents=True, exist_ok=True)
-            target = free_path(folder, path.name)
-            os.replace(path, target)  # same file system: the sample is in one place or the other
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+                # same file system: the sample is in one place or the other
+                os.replace(path, free_path(folder, path.name))
+            except OSError as error:
+                self.app.report_error(
+                    ServantError(f"{path}: cannot move it to {scene} ({error.strerror})")
+                )
+                return
             self.app.log_line(None, f"moved {path.name} from {self.scene} to {scene}")
             self.rescan()
 
@@ -169,12 +191,12 @@ class LibraryScreen(Screen[None]):
 
     def action_retrain(self) -> None:
         self.status("retraining the recognisers…")
-        self.retrain()
+        self.retrain(self.query_one(WorkProgress).begin())
 
     @work(thread=True, exclusive=True, group="retrain", exit_on_error=False)
-    def retrain(self) -> None:
+    def retrain(self, on_progress: OnProgress) -> None:
         library = SceneLibrary.scan(self.root)
-        self.app.engine.retrain(library)
+        with_progress(self.app.engine.retrain, library, on_progress)
         saved = getattr(self.app.engine, "model_path", None)
         self.post_message(
             RetrainDone(
@@ -186,21 +208,25 @@ class LibraryScreen(Screen[None]):
 
     @on(RetrainDone)
     def retrained(self, message: RetrainDone) -> None:
+        self.query_one(WorkProgress).end(finished=True)
         self.status(message.summary)
         self.app.log_line(None, message.summary)
 
     def action_evaluate(self) -> None:
         self.status("evaluating (temporal protocol)…")
-        self.evaluate()
+        self.evaluate(self.query_one(WorkProgress).begin())
 
     @work(thread=True, exclusive=True, group="evaluate", exit_on_error=False)
-    def evaluate(self) -> None:
-        self.post_message(
-            EvaluationDone(evaluate_audio(SceneLibrary.scan(self.root), protocol="temporal"))
+    def evaluate(self, on_progress: OnProgress) -> None:
+        library = SceneLibrary.scan(self.root)
+        result = with_progress(
+            evaluate_audio, library, on_progress, pictures=False, protocol="temporal"
         )
+        self.post_message(EvaluationDone(result))
 
     @on(EvaluationDone)
     def evaluated(self, message: EvaluationDone) -> None:
         self.evaluation = message.result
+        self.query_one(WorkProgress).end(finished=True)
         self.query_one("#evaluation", Static).update(evaluation_table(message.result))
         self.status(f"evaluated {message.result['n_test']} test windows")

@@ -13,6 +13,8 @@ from textual.screen import Screen
 from textual.widgets import Button, Footer, Header, Input, Label, Select, Static
 
 from servant_core.errors import ServantError
+from servant_tui.screens.dialogs import UnsavedChanges
+from servant_tui.screens.secondary import HELP_AND_QUIT
 
 DEVICE_FIELDS = (
     ("audio_device", "audio input", "sounddevice name or index; empty: the default input"),
@@ -46,8 +48,9 @@ def number(text: str, what: str, kind: type = float) -> Any:
 
 class SettingsScreen(Screen[None]):
     BINDINGS = [
-        Binding("escape", "app.pop_screen", "Back"),
+        Binding("escape", "back", "Back"),
         Binding("ctrl+s", "save", "Save"),
+        *HELP_AND_QUIT,
     ]
 
     def compose(self) -> ComposeResult:
@@ -93,6 +96,16 @@ class SettingsScreen(Screen[None]):
                 yield Button("Back", id="back")
         yield Footer()
 
+    def on_mount(self) -> None:
+        self.saved_form = self.form()
+
+    def form(self) -> dict[str, Any]:
+        """What every field shows, to tell whether the user changed anything since the last save
+        (compared as shown: a number shown rounded is not a change)."""
+        values: dict[str, Any] = {field.id: field.value for field in self.query(Input)}
+        values["protocol"] = self.query_one("#protocol", Select).value
+        return values
+
     def edited(self) -> Any:
         """The settings as the form shows them (not yet checked)."""
         values: dict[str, Any] = {}
@@ -118,7 +131,8 @@ class SettingsScreen(Screen[None]):
         return dataclasses.replace(self.loaded, **values)
 
     @on(Button.Pressed, "#save")
-    def action_save(self) -> None:
+    def action_save(self) -> bool:
+        """Save the form; False (and the reason said) if it could not be saved."""
         from servant_core.settings import save_settings
 
         try:
@@ -126,11 +140,31 @@ class SettingsScreen(Screen[None]):
             path = save_settings(settings)
         except ServantError as error:
             self.app.report_error(error)
-            return
+            return False
+        except OSError as error:
+            where = error.filename or "the config folder"
+            self.app.report_error(
+                ServantError(
+                    f"settings: not saved, {where}: {error.strerror}; "
+                    "check that the config folder is writable"
+                )
+            )
+            return False
         self.app.settings = self.loaded = settings
+        self.saved_form = self.form()
         self.app.log_line(None, f"settings saved to {path}")
         self.notify(f"Saved to {path}. Devices change at the next start.", title="Settings")
+        return True
 
     @on(Button.Pressed, "#back")
-    def back(self) -> None:
-        self.app.pop_screen()
+    def action_back(self) -> None:
+        """Leave; with unsaved edits, ask first whether to save, discard or keep editing them."""
+        if self.form() == self.saved_form:
+            self.app.pop_screen()
+            return
+
+        def answered(choice: str | None) -> None:
+            if choice == "discard" or (choice == "save" and self.action_save()):
+                self.app.pop_screen()
+
+        self.app.push_screen(UnsavedChanges(), answered)

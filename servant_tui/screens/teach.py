@@ -47,8 +47,11 @@ from servant_tui.messages import (
     TrainingDone,
     TrainingProgress,
 )
+from servant_tui.screens.secondary import HELP_AND_QUIT, ReportsWorkerErrors, with_progress
 from servant_tui.widgets.colours import share_strip
+from servant_tui.widgets.progress import OnProgress, WorkProgress
 from servant_tui.widgets.spectrum import Spectrum
+from servant_tui.widgets.text import error_text
 
 STEPS = (
     ("scene", "1 Scene"),
@@ -64,11 +67,21 @@ def stamp() -> str:
     return datetime.now().strftime("teach-%Y%m%d-%H%M%S-%f")
 
 
-class TeachScreen(Screen[None]):
+# Where each step's worker says how it went.
+STATUS_OF_WORK = {
+    "record": "#sound-status",
+    "picture": "#picture-status",
+    "train": "#train-status",
+    "retrain": "#train-status",
+}
+
+
+class TeachScreen(ReportsWorkerErrors, Screen[None]):
     BINDINGS = [
         Binding("escape", "app.pop_screen", "Back"),
-        Binding("ctrl+n", "step(1)", "Next step"),
-        Binding("ctrl+b", "step(-1)", "Previous step"),
+        Binding("ctrl+n", "step(1)", "Next"),
+        Binding("ctrl+b", "step(-1)", "Previous"),
+        *HELP_AND_QUIT,
     ]
 
     def __init__(self) -> None:
@@ -85,10 +98,8 @@ class TeachScreen(Screen[None]):
     def root(self) -> Path:
         return self.app.library_root
 
-    def joints(self) -> list[str]:
-        """The connected arm's joints, else the configured ones."""
-        if self.app.arm_state is not None and self.app.arm_state.angles:
-            return list(self.app.arm_state.angles)
+    def settings(self) -> Any:
+        """The user's settings (loaded once for the app), or None if they cannot be read."""
         from servant_core.settings import load_settings
 
         if self.app.settings is None:
@@ -96,11 +107,22 @@ class TeachScreen(Screen[None]):
                 self.app.settings = load_settings()
             except ServantError as error:
                 self.app.report_error(error)
-                return []
-        return [joint.name for joint in self.app.settings.joints]
+        return self.app.settings
+
+    def joints(self) -> list[str]:
+        """The connected arm's joints, else the configured ones."""
+        if self.app.arm_state is not None and self.app.arm_state.angles:
+            return list(self.app.arm_state.angles)
+        settings = self.settings()
+        return [] if settings is None else [joint.name for joint in settings.joints]
+
+    def known_scenes(self) -> list[str]:
+        """The library's scenes and those the engine's recognisers know (the demo's, say)."""
+        scenes = set(SceneLibrary.scan(self.root).scenes) if self.root.is_dir() else set()
+        return sorted(scenes | self.app.known_scenes)
 
     def compose(self) -> ComposeResult:
-        scenes = SceneLibrary.scan(self.root).scenes if self.root.is_dir() else []
+        scenes = self.known_scenes()
         yield Header()
         with Horizontal(id="teach"):
             yield OptionList(*(label for _, label in STEPS), id="steps")
@@ -147,6 +169,7 @@ class TeachScreen(Screen[None]):
                         yield Button("Train", id="train-learner", variant="primary")
                         yield Button("Retrain recognisers", id="retrain")
                     yield ProgressBar(show_eta=False, id="train-progress")
+                    yield WorkProgress(id="retrain-progress")
                     yield Sparkline([], id="error-curve")
                     yield Static(id="train-status")
                 with Vertical(id="test"):
@@ -170,6 +193,21 @@ class TeachScreen(Screen[None]):
     @on(OptionList.OptionHighlighted, "#steps")
     def _step_chosen(self, event: OptionList.OptionHighlighted) -> None:
         self.query_one(ContentSwitcher).current = STEPS[event.option_index][0]
+        self.call_after_refresh(self._focus_in_step)
+
+    def _focus_in_step(self) -> None:
+        """Keep focus on the steps list or in the step shown; focus left on a control of a hidden
+        step moves to the shown step's first control, so Enter acts on what the user sees."""
+        step = self.query_one(ContentSwitcher).visible_content
+        focused = self.focused
+        if step is None or (focused is not None and focused.id == "steps"):
+            return
+        if focused is not None and step in focused.ancestors:
+            return
+        for widget in self.focus_chain:
+            if step in widget.ancestors:
+                widget.focus()
+                return
 
     def go(self, step: str) -> None:
         self.query_one("#steps", OptionList).highlighted = [s for s, _ in STEPS].index(step)
@@ -292,7 +330,7 @@ class TeachScreen(Screen[None]):
 
     def typed_pose(self) -> dict[str, float]:
         pose = {}
-        settings = self.app.settings
+        settings = self.settings()
         for joint in self.joints():
             text = self.query_one(f"#joint-{joint}", Input).value.strip()
             try:
@@ -336,6 +374,7 @@ class TeachScreen(Screen[None]):
         self.scene = None
         self.windows = self.pictures = 0
         self.query_one("#new-scene", Input).value = ""
+        self.query_one("#known", Select).set_options((s, s) for s in self.known_scenes())
         self.go("scene")
 
     # -- 5 train ----------------------------------------------------------------------------------
@@ -344,16 +383,22 @@ class TeachScreen(Screen[None]):
     def start_training(self) -> None:
         self.errors = []
         self.query_one("#train-learner", Button).disabled = True
-        self.train()
+        self.train(self.settings())
 
     @work(thread=True, exclusive=True, group="train", exit_on_error=False)
-    def train(self) -> None:
+    def train(self, settings: Any) -> None:
         from servant_core.actions.learner import ActionLearner
         from servant_core.actions.records import load_records
 
         try:
             records = load_records()
-            learner = ActionLearner(report_every=100)  # enough points for a curve
+            learner = ActionLearner(
+                report_every=100,  # enough points for a curve
+                # a record that sets only some joints (e.g. `servant teach` with one angle)
+                # leaves the others at their home angle, as the CLI does
+                home=None if settings is None else {j.name: j.home_angle for j in settings.joints},
+                confidence_threshold=50.0 if settings is None else settings.confidence_threshold,
+            )
             total = learner.max_iter
 
             def report(iterations: int, error: float) -> None:
@@ -391,16 +436,17 @@ class TeachScreen(Screen[None]):
     @on(Button.Pressed, "#retrain")
     def start_retrain(self) -> None:
         self.query_one("#train-status", Static).update("retraining the recognisers…")
-        self.retrain()
+        self.retrain(self.query_one("#retrain-progress", WorkProgress).begin())
 
     @work(thread=True, exclusive=True, group="retrain", exit_on_error=False)
-    def retrain(self) -> None:
+    def retrain(self, on_progress: OnProgress) -> None:
         library = SceneLibrary.scan(self.root)
-        self.app.engine.retrain(library)
+        with_progress(self.app.engine.retrain, library, on_progress)
         self.post_message(RetrainDone(f"recognisers retrained on {len(library.scenes)} scenes"))
 
     @on(RetrainDone)
     def retrained(self, message: RetrainDone) -> None:
+        self.query_one("#retrain-progress", WorkProgress).end(finished=True)
         self.query_one("#train-status", Static).update(message.summary)
         self.app.log_line(None, message.summary)
 
@@ -416,6 +462,15 @@ class TeachScreen(Screen[None]):
             pose = learner.pose(label_scores(scene, learner.scenes_))
             table.add_row(
                 scene, *(f"{pose.get(j, float('nan')):.1f}°" for j in self.joints()), key=scene
+            )
+
+    def work_failed(self, group: str, error: BaseException) -> None:
+        if group == "retrain":
+            self.query_one("#retrain-progress", WorkProgress).end(finished=False)
+        status = STATUS_OF_WORK.get(group)
+        if status is not None:
+            self.query_one(status, Static).update(
+                Text.assemble((f"{group} failed: ", "bold red"), error_text(error))
             )
 
     def _try(self, step: Any) -> Any:

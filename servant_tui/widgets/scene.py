@@ -84,10 +84,10 @@ class ScenePane(Static):
         if self.fusion is None:
             return Text("–", "grey50")
         state = self.fusion
-        text = Text(state.phase, "magenta")
-        if state.scene:
-            text.append(f" {state.scene}", "cyan")
-        return text
+        if not state.scene:
+            return Text(state.phase, "magenta")
+        # the space ends the styled run: a reader trimming runs keeps the words apart
+        return Text.assemble((f"{state.phase} ", "magenta"), (state.scene, "cyan"))
 
     def _window_text(self) -> Text:
         state = self.fusion

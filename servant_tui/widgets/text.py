@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from rich.text import Text
 
+from servant_core.errors import ServantError
+
 
 def clock(t: float) -> str:
     """Engine time as minutes:seconds since the engine started."""
@@ -19,3 +21,9 @@ def bar(fraction: float, width: int, style: str = "green") -> Text:
     partial = " ▏▎▍▌▋▊▉"[rest] if full < width else ""
     filled = "█" * full + partial.strip()
     return Text.assemble((filled, style), ("·" * (width - len(filled)), "grey35"))
+
+
+def error_text(error: BaseException) -> str:
+    """An error as the user reads it: a ServantError is already one clear line; anything else
+    is unexpected, so its type is kept."""
+    return str(error) if isinstance(error, ServantError) else f"{type(error).__name__}: {error}"
