@@ -177,7 +177,7 @@ engine.start(); time.sleep(0.2); print("running", engine.running); engine.stop()
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO)
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
-    problem = [line for line in lines if line.startswith("DeviceStatus False")]
+    problem = [line for line in lines if line.startswith("DeviceStatus False microphone")]
     assert len(problem) == 1 and "PortAudio library is missing" in problem[0]
     assert "libportaudio2" in problem[0]
     assert "running True" in lines
