@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
+import shutil
 import statistics
+import subprocess
+import sys
 import time
-from collections.abc import Callable
+import uuid
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -25,3 +30,47 @@ def median_ms(fn: Callable[[], object], repeats: int = 30) -> float:
         fn()
         times.append((time.perf_counter() - start) * 1000)
     return statistics.median(times)
+
+
+def rss_mb(pid: int, field: str = "VmRSS") -> float:
+    """A process's resident memory now (`VmRSS`) or at its peak (`VmHWM`), in MB."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith(f"{field}:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+@contextlib.contextmanager
+def in_tmux(
+    arguments: str, env: dict[str, str], size: tuple[int, int] = (160, 48)
+) -> Iterator[str]:
+    """Run `servant ARGUMENTS` in a real terminal (a detached tmux session, cwd the repository);
+    yields the session's name; quits the application (`q`) and ends the session afterwards."""
+    if shutil.which("tmux") is None:
+        raise SystemExit("tmux is not installed; install it (scripts/install-system-packages)")
+    servant = shutil.which("servant") or f"{sys.executable} -m servant_tui"
+    session = f"servant-bench-{uuid.uuid4().hex[:8]}"
+    command = f"cd {REPO} && exec {servant} {arguments}"
+    width, height = size
+    subprocess.run(
+        ["tmux", "new-session", "-d", "-s", session, "-x", str(width), "-y", str(height), command],
+        check=True,
+        env=env,
+    )
+    try:
+        yield session
+    finally:
+        subprocess.run(["tmux", "send-keys", "-t", session, "q"], capture_output=True)
+        time.sleep(2)
+        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True)
+
+
+def tmux_pid(session: str) -> int:
+    """The process id of the program running in the tmux session."""
+    answer = subprocess.run(
+        ["tmux", "display-message", "-p", "-t", session, "#{pane_pid}"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return int(answer.stdout)

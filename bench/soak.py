@@ -1,0 +1,93 @@
+"""Memory of `servant demo` over a long run, in a real terminal (tmux) or headless.
+
+Samples resident memory every `--every` seconds for `--minutes`; in the terminal it can retrain
+the recognisers from the library screen (`l`, then `R`) at `--retrain-at` minutes. Prints the
+samples, the growth per hour after `--warmup` minutes (least-squares slope) and the peak.
+Targets (issue 13): at most 5 MB/h after the first 10 minutes, at most 250 MB after a retrain.
+
+Run from the repository root: `python bench/soak.py --minutes 60 --mode tui --retrain-at 15`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+
+import numpy as np
+from common import REPO, in_tmux, rss_mb, tmux_pid
+
+
+@contextlib.contextmanager
+def headless(env: dict[str, str]) -> Iterator[int]:
+    process = subprocess.Popen(
+        [sys.executable, "-m", "servant_tui", "demo", "--headless"],
+        cwd=REPO,
+        env=env,
+        stdout=subprocess.DEVNULL,
+    )
+    try:
+        yield process.pid
+    finally:
+        process.terminate()
+        process.wait(timeout=30)
+
+
+def press(session: str, *keys: str) -> None:
+    for key in keys:
+        subprocess.run(["tmux", "send-keys", "-t", session, key], check=True)
+        time.sleep(1.0)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--minutes", type=float, default=60.0)
+    parser.add_argument("--every", type=float, default=30.0, help="seconds between samples")
+    parser.add_argument("--warmup", type=float, default=10.0, help="minutes left out of the slope")
+    parser.add_argument("--mode", choices=("tui", "headless"), default="tui")
+    parser.add_argument("--retrain-at", type=float, help="minutes; tui mode only")
+    args = parser.parse_args()
+    samples: list[tuple[float, float]] = []
+    retrained_at: float | None = None
+    with tempfile.TemporaryDirectory() as scratch:
+        env = {**os.environ, "SERVANT_DATA_DIR": scratch, "SERVANT_CONFIG_DIR": scratch}
+        runner = in_tmux("demo", env) if args.mode == "tui" else headless(env)
+        with runner as handle:
+            pid = tmux_pid(handle) if isinstance(handle, str) else handle
+            start = time.monotonic()
+            while (elapsed := (time.monotonic() - start) / 60) < args.minutes:
+                samples.append((elapsed, rss_mb(pid)))
+                print(f"{elapsed:6.1f} min  {samples[-1][1]:6.1f} MB", flush=True)
+                if (
+                    isinstance(handle, str)
+                    and args.retrain_at is not None
+                    and retrained_at is None
+                    and elapsed >= args.retrain_at
+                ):
+                    press(handle, "l", "R")
+                    retrained_at = elapsed
+                    print(f"{elapsed:6.1f} min  retrain started (library screen, R)", flush=True)
+                time.sleep(args.every)
+            peak = rss_mb(pid, "VmHWM")
+    late = np.array([(t, mb) for t, mb in samples if t >= args.warmup])
+    print(f"servant demo ({args.mode}), {args.minutes:g} min, a sample every {args.every:g} s")
+    if len(late) >= 2:
+        slope = np.polyfit(late[:, 0] / 60, late[:, 1], 1)[0]
+        print(f"  growth after {args.warmup:g} min: {slope:+.1f} MB/h   (target <= 5 MB/h)")
+    else:
+        print(f"  growth: too short a run to measure past the {args.warmup:g} min warm-up")
+    if retrained_at is not None:
+        after = [mb for t, mb in samples if t > retrained_at]
+        most = max(after) if after else float("nan")
+        print(f"  most after the retrain: {most:.0f} MB   (target <= 250 MB)")
+    print(f"  peak: {peak:.0f} MB; last: {samples[-1][1]:.0f} MB")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
