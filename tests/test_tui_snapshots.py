@@ -1,4 +1,5 @@
-"""SVG snapshots of every screen, at 100x30 and 160x48, in a deterministic state.
+"""SVG snapshots of every screen, at 80x24 (the smallest usable), 100x30 and 160x48, in a
+deterministic state.
 
 The engine is the scripted replay of `tui_replay` (fixed times, seeded spectrum), and the library
 is written by the test at a fixed path, so the same pixels come out on every run. Review
@@ -11,6 +12,7 @@ import shutil
 from pathlib import Path
 
 import pytest
+from textual.widgets import Input
 
 from servant_tui.app import ServantApp
 from servant_tui.screens.dialogs import LabelPrompt
@@ -20,7 +22,11 @@ from tests.test_tui_live import settle
 from tests.tui_library import write_library
 from tests.tui_replay import ReplayEngine, unknown_scene_script
 
-SIZES = [pytest.param((100, 30), id="100x30"), pytest.param((160, 48), id="160x48")]
+SIZES = [
+    pytest.param((80, 24), id="80x24"),
+    pytest.param((100, 30), id="100x30"),
+    pytest.param((160, 48), id="160x48"),
+]
 LIBRARY = Path("/tmp/servant-snapshot-library")
 
 
@@ -67,7 +73,13 @@ def test_help_screen(snap_compare, size, library):
 def test_unknown_place_prompt(snap_compare, size, library):
     app = ServantApp(ReplayEngine(unknown_scene_script()), mode="demo", library_root=library)
     until = lambda app: isinstance(app.screen, LabelPrompt)  # noqa: E731
-    assert snap_compare(app, terminal_size=size, run_before=replayed(app, (), until))
+
+    async def run_before(pilot) -> None:
+        await replayed(app, (), until)(pilot)
+        app.screen.query_one(Input).cursor_blink = False  # the same pixels whenever it is taken
+        await pilot.pause()
+
+    assert snap_compare(app, terminal_size=size, run_before=run_before)
 
 
 @pytest.mark.parametrize("size", SIZES)
@@ -82,6 +94,24 @@ def test_teach_screen(snap_compare, size, library):
     app = ServantApp(ReplayEngine(), mode="demo", library_root=library)
     until = lambda app: isinstance(app.screen, TeachScreen)  # noqa: E731
     assert snap_compare(app, terminal_size=size, run_before=replayed(app, ("t",), until))
+
+
+@pytest.mark.parametrize("size", SIZES)
+def test_teach_pose_step(snap_compare, size, library, tmp_path, monkeypatch):
+    """The pose step whole, its inputs one input high, the typed digits visible."""
+    monkeypatch.setenv("SERVANT_CONFIG_DIR", str(tmp_path))  # default joints, whoever runs it
+    app = ServantApp(ReplayEngine(), mode="demo", library_root=library)
+
+    async def run_before(pilot) -> None:
+        await replayed(app, ("t",), lambda app: isinstance(app.screen, TeachScreen))(pilot)
+        app.screen.go("pose")
+        await pilot.pause()
+        await pilot.click("#joint-shoulder")
+        await pilot.press(*"45")
+        app.screen.query_one("#joint-shoulder", Input).cursor_blink = False
+        await pilot.pause()
+
+    assert snap_compare(app, terminal_size=size, run_before=run_before)
 
 
 @pytest.mark.parametrize("size", SIZES)
