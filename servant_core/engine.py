@@ -575,13 +575,14 @@ class Engine:
 
     def apply_settings(self, settings: Any) -> None:
         """Use the user's settings (`servant_core.settings.Settings`) from now on: the fusion
-        windows (the current window starts afresh), the confidence threshold, and the arm's port,
-        protocol and joints (reconnected only when they changed; an arm attached with `set_arm`,
-        like the demo's, stays). Call it off the UI thread: a controller that does not answer
-        takes up to a second to say so."""
+        windows (when they changed, the current window starts afresh), the confidence threshold,
+        and the arm's port, protocol and joints (reconnected only when they changed; an arm
+        attached with `set_arm`, like the demo's, stays). Call it off the UI thread: a
+        controller that does not answer takes up to a second to say so."""
         config = fusion_config(settings)
         with self._lock:
-            if hasattr(self.fusion, "config"):  # the policies of servant_core.fusion
+            # the policies of servant_core.fusion; unchanged windows keep the current one open
+            if getattr(self.fusion, "config", config) != config:
                 policy: Any = type(self.fusion)
                 self.fusion = policy(config)
             self.confidence_threshold = float(settings.confidence_threshold)
