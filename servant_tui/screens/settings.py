@@ -102,7 +102,7 @@ class SettingsScreen(Screen[None]):
     def form(self) -> dict[str, Any]:
         """What every field shows, to tell whether the user changed anything since the last save
         (compared as shown: a number shown rounded is not a change)."""
-        values: dict[str, Any] = {field.id: field.value for field in self.query(Input)}
+        values: dict[str, Any] = {str(field.id): field.value for field in self.query(Input)}
         values["protocol"] = self.query_one("#protocol", Select).value
         return values
 

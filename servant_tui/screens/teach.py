@@ -392,13 +392,17 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
 
         try:
             records = load_records()
-            learner = ActionLearner(
-                report_every=100,  # enough points for a curve
-                # a record that sets only some joints (e.g. `servant teach` with one angle)
-                # leaves the others at their home angle, as the CLI does
-                home=None if settings is None else {j.name: j.home_angle for j in settings.joints},
-                confidence_threshold=50.0 if settings is None else settings.confidence_threshold,
+            # a record that sets only some joints (e.g. `servant teach` with one angle) leaves
+            # the others at their home angle, as the CLI does
+            options = (
+                {}
+                if settings is None
+                else {
+                    "home": {j.name: j.home_angle for j in settings.joints},
+                    "confidence_threshold": settings.confidence_threshold,
+                }
             )
+            learner = ActionLearner(report_every=100, **options)  # 100: points for a curve
             total = learner.max_iter
 
             def report(iterations: int, error: float) -> None:
