@@ -13,7 +13,6 @@ from textual.binding import Binding
 from textual.screen import Screen
 from textual.worker import Worker, WorkerState
 
-from servant_core.errors import ServantError
 from servant_core.event_text import confidence_text, place
 from servant_core.events import (
     AcousticPrediction,
@@ -30,7 +29,7 @@ from servant_core.storage import data_dir
 from servant_tui.messages import EngineEvent, SpectrumUpdate, TrainingDone
 from servant_tui.screens.dialogs import HelpScreen, LabelPrompt
 from servant_tui.screens.live import LiveScreen, device_message
-from servant_tui.widgets.text import clock
+from servant_tui.widgets.text import clock, error_text
 
 
 class EngineLike(Protocol):
@@ -57,6 +56,8 @@ PROMPT_AFTER_SKIP_S = 300.0
 class ServantApp(App[None]):
     TITLE = "Servant"
     CSS_PATH = "app.tcss"
+    # app.tcss lays the screens out tighter below 100 columns (80x24 must be usable)
+    HORIZONTAL_BREAKPOINTS = [(0, "-narrow"), (100, "-wide")]
     BINDINGS = [
         Binding("a", "toggle_arm", "Arm/Disarm"),
         Binding("t", "teach", "Teach"),
@@ -187,7 +188,7 @@ class ServantApp(App[None]):
         if isinstance(event, Decision):
             if event.scene:
                 confidence = confidence_text(event.confidence, event.confidence_unit)
-                return f"[bold green]{escape(event.line)}[/] ({confidence})"
+                return f"[bold green]{escape(event.line)} [/]({confidence})"
             return f"[yellow]{escape(event.line)}[/]"
         if isinstance(event, (AcousticPrediction, VisualPrediction)):
             verb = "hears" if isinstance(event, AcousticPrediction) else "sees"
@@ -214,12 +215,13 @@ class ServantApp(App[None]):
         return "[bold red]arm ARMED[/]" if state.armed else "arm disarmed"
 
     def log_line(self, t: float | None, line: str) -> None:
-        stamp = f"[dim]{clock(t)}[/] " if t is not None else ""
+        # the space ends the styled run: a reader trimming runs keeps the words apart
+        stamp = f"[dim]{clock(t)} [/]" if t is not None else ""
         self.live.write_log(stamp + line)
 
     def report_error(self, error: BaseException) -> None:
         """Errors a user can cause go to the log and a notification; the application stays up."""
-        text = str(error) if isinstance(error, ServantError) else f"{type(error).__name__}: {error}"
+        text = error_text(error)
         self.log_line(None, f"[bold red]{escape(text)}[/]")
         self.notify(text, title="Servant", severity="error", timeout=8)
 
@@ -309,4 +311,5 @@ class ServantApp(App[None]):
             "Library", "Scenes, recordings and pictures; retrain, evaluate", self.action_library
         )
         yield SystemCommand("Settings", "Devices, joints and fusion windows", self.action_settings)
-        yield SystemCommand("Keys", "Show the help screen", self.action_help)
+        # Textual's own "Keys" command shows the keys panel; this one is Servant's help screen
+        yield SystemCommand("Help", "What each pane shows, and Servant's keys", self.action_help)

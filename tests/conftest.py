@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -55,3 +57,15 @@ def link_library(root: Path, shared: Path, scenes: dict[str, tuple[list[str], in
 def tone(freq: float, seconds: float, rate: int, amplitude: float = 0.5) -> np.ndarray:
     t = np.arange(int(round(seconds * rate))) / rate
     return (amplitude * np.sin(2 * np.pi * freq * t)).astype(np.float32)
+
+
+def servant(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    """`servant ARGS` in a child process, as a user runs it (output captured)."""
+    return subprocess.run(
+        [sys.executable, "-m", "servant_tui", *args],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env=env,
+        timeout=120,
+    )

@@ -3,9 +3,6 @@ windows and pictures, and a walk in which detections, mismatches and "No scene d
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
@@ -22,7 +19,7 @@ from servant_core.demo.scenes import (
 )
 from servant_core.engine import build_demo_engine
 from servant_core.events import AcousticPrediction, Decision, VisualPrediction
-from tests.conftest import REPO
+from tests.conftest import servant
 
 
 @pytest.fixture(scope="module")
@@ -114,13 +111,7 @@ def test_walk_is_deterministic_and_shows_detections_mismatch_and_no_scene():
 
 
 def demo_lines(*options: str) -> list[str]:
-    result = subprocess.run(
-        [sys.executable, "-m", "servant_tui", "demo", "--headless", "--fast", *options],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        timeout=120,
-    )
+    result = servant("demo", "--headless", "--fast", *options)
     assert result.returncode == 0, result.stderr
     return result.stdout.splitlines()
 
@@ -159,23 +150,6 @@ def test_servant_run_headless_on_a_video_camera_without_microphone(tmp_path):
     for _ in range(5):
         writer.write(np.zeros((24, 32, 3), np.uint8))
     writer.release()
-    result = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "servant_tui",
-            "run",
-            "--headless",
-            "--no-mic",
-            "--camera",
-            str(path),
-            "--duration",
-            "0.3",
-        ],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        timeout=60,
-    )
+    result = servant("run", "--headless", "--no-mic", "--camera", str(path), "--duration", "0.3")
     assert result.returncode == 0, result.stderr
     assert f"camera ok: video {path}: ready" in result.stdout

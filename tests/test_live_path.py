@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -32,7 +30,7 @@ from servant_core.fusion import FusionConfig
 from servant_core.servo.emulator import start_emulator
 from servant_core.settings import Settings, default_joints, save_settings
 from servant_tui.main import build_parser
-from tests.conftest import REPO
+from tests.conftest import servant
 from tests.test_microphone import play
 from tests.test_microphone import virtual_mic as virtual_mic  # a fixture
 
@@ -104,13 +102,9 @@ def test_servant_run_headless_moves_the_arm_to_the_taught_pose(
     video = scene_video("street", tmp_path / "street.avi")
     player = play(scene_sound("street", tmp_path / "street.wav"))
     try:
-        result = subprocess.run(
-            [sys.executable, "-m", "servant_tui", "run", "--headless", "--model", str(model)]
-            + ["--port", port, "--arm", "--camera", str(video), "--duration", "20"],
-            capture_output=True,
-            text=True,
-            cwd=REPO,
-            timeout=120,
+        result = servant(
+            *["run", "--headless", "--model", str(model), "--port", port, "--arm"],
+            *["--camera", str(video), "--duration", "20"],
         )
     finally:
         player.kill()
@@ -141,14 +135,7 @@ def test_the_arm_of_the_settings_is_attached_disarmed_and_moves_only_when_armed(
 
 def test_servant_run_with_arm_but_no_arm_says_so_in_one_line():
     save_settings(Settings(serial_port="/dev/does-not-exist"))
-    result = subprocess.run(
-        [sys.executable, "-m", "servant_tui", "run", "--headless", "--no-mic", "--no-camera"]
-        + ["--arm", "--duration", "0.2"],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        timeout=60,
-    )
+    result = servant("run", "--headless", "--no-mic", "--no-camera", "--arm", "--duration", "0.2")
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("servant: error: ") and "--arm" in lines[0]
@@ -217,14 +204,7 @@ def test_the_confidence_threshold_saved_while_running_decides_whether_the_arm_ac
 
 
 def test_a_first_start_without_a_model_says_what_to_do():
-    result = subprocess.run(
-        [sys.executable, "-m", "servant_tui", "run", "--headless", "--no-mic", "--no-camera"]
-        + ["--duration", "0.3"],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        timeout=60,
-    )
+    result = servant("run", "--headless", "--no-mic", "--no-camera", "--duration", "0.3")
     assert result.returncode == 0, result.stderr
     assert f"note: {NO_MODEL}" in result.stdout
     assert "teach mode, key t" in NO_MODEL and "servant train" in NO_MODEL
@@ -250,14 +230,7 @@ def test_the_demo_touches_nothing_outside_its_temporary_space(tmp_path):
         "SERVANT_CONFIG_DIR": str(blocker / "config"),
         "HOME": str(tmp_path / "home"),
     }
-    result = subprocess.run(
-        [sys.executable, "-m", "servant_tui", "demo", "--headless", "--fast", "--duration", "20"],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        env=env,
-        timeout=120,
-    )
+    result = servant("demo", "--headless", "--fast", "--duration", "20", env=env)
     assert result.returncode == 0, result.stderr
     assert "CoffeeScene detected" in result.stdout
     assert not (tmp_path / "home").exists()
@@ -294,14 +267,7 @@ def test_arm_states_carry_the_engines_time():
 
 def test_a_missing_camera_is_one_line_of_ours_not_opencvs_warnings():
     """OpenCV printed `[ WARN:0@…] … can't open camera by index` over the app's title."""
-    result = subprocess.run(
-        [sys.executable, "-m", "servant_tui", "run", "--headless", "--no-mic", "--camera", "7"]
-        + ["--duration", "0.5"],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        timeout=60,
-    )
+    result = servant("run", "--headless", "--no-mic", "--camera", "7", "--duration", "0.5")
     assert result.returncode == 0, result.stderr
     assert "WARN" not in result.stderr and "VIDEOIO" not in result.stderr, result.stderr
     assert "camera PROBLEM: camera 7: no such camera" in result.stdout

@@ -43,7 +43,9 @@ class Camera:
             what = (
                 "no such camera" if not self.is_file else "cannot open this video or image sequence"
             )
-            raise ServantError(f"{self.name}: {what}; check the index or path (Settings, or --camera)")
+            raise ServantError(
+                f"{self.name}: {what}; check the index or path (Settings, or --camera)"
+            )
         self._capture = capture
 
     def read(self) -> np.ndarray:

@@ -51,14 +51,15 @@ class DeviceBar(Static):
         for device in DEVICES:
             status = self.statuses.get(device)
             if status is None:
-                parts.append(f"[dim]{device} …[/]")
+                parts.append(f"[dim]{device} …   [/]")
                 continue
             message = device_message(status)
             if len(device) + 3 + len(message) > room:
                 message = message[: max(room - len(device) - 4, 0)] + "…"
             mark, style, body = ("✓", "green", "dim") if status.ok else ("✗", "bold red", "red")
-            parts.append(f"[{style}]{device} {mark}[/] [{body}]{escape(message)}[/]")
-        return "   ".join(parts)
+            # spaces end the styled runs before them (see ServantApp.log_line)
+            parts.append(f"[{style}]{device} {mark} [/][{body}]{escape(message)}   [/]")
+        return "".join(parts).rstrip()
 
 
 class LiveScreen(Screen[None]):
