@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 from servant_core.errors import ServantError
 from servant_core.events import ErrorEvent
 from servant_tui.app import ServantApp
@@ -11,11 +13,15 @@ from tests.tui_replay import ReplayEngine, unknown_scene_script
 
 
 async def settle(pilot, predicate, tries: int = 100) -> None:
-    for _ in range(tries):
+    """Wait until `predicate()` holds: `tries` pauses of 20 ms, and at least 15 s of wall time
+    (a busy 2-core machine can take seconds to run a worker)."""
+    deadline = time.monotonic() + max(15.0, tries * 0.02)
+    while True:
         if predicate():
             return
+        if time.monotonic() > deadline:
+            raise AssertionError("the application never reached the expected state")
         await pilot.pause(0.02)
-    raise AssertionError("the application never reached the expected state")
 
 
 def log_text(app) -> str:
