@@ -144,3 +144,37 @@ def test_emulate_servo_prints_the_port_to_connect_to():
     )
     assert proc.returncode == 0, proc.stderr
     assert re.match(r"Emulating a Lynxmotion SSC-32 on /dev/pts/\d+; connect with", proc.stdout)
+
+
+def test_teach_survives_the_controller_killed_while_idle(tmp_path):
+    # Issue 13, 1: the emulator killed between two answers; `record` then read the lost port.
+    emulator = subprocess.Popen(
+        [sys.executable, "-m", "servant_tui", "emulate-servo", "--protocol", "maestro"],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert emulator.stdout is not None
+    found = re.search(r" on (\S+);", emulator.stdout.readline())
+    assert found is not None
+    records = tmp_path / "records.json"
+    argv = ["--port", found.group(1), "--records", str(records), "--iterations", "20"]
+    argv += ["--learner", str(tmp_path / "learner.npz")]
+    teach = subprocess.Popen(
+        [sys.executable, "-m", "servant_tui", "teach", *argv],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert teach.stdout is not None and teach.stdin is not None
+        assert "The arm is armed on" in teach.stdout.readline()
+    finally:
+        emulator.kill()
+        emulator.wait()
+    out, err = teach.communicate("coffee\nrecord 0.2\n20\n\ncoffee\n", timeout=60)
+    assert "Traceback" not in err, err
+    assert teach.returncode == 0, err
+    lost = [line for line in out.splitlines() if "the arm is disarmed" in line]
+    assert len(lost) == 1 and "was lost" in lost[0], out
+    assert [(r.scene, r.pose) for r in load_records(records)] == [("coffee", {"shoulder": 20.0})]
