@@ -83,7 +83,7 @@ def test_records_from_an_older_version_are_migrated_and_backed_up(tmp_path):
         ("coffee", {"elbow": 42.0}),
         ("gym", {"elbow": 10.0}),
     ]
-    assert records[0].scores["visual"] == {"coffee": 1.0, "gym": 0.0}
+    assert records[0].scores["visual"] == {"coffee": 1.0}
     append_record(record("street", {"elbow": 70.0}), path, legacy_joint="elbow")
     assert json.loads((tmp_path / "records.json.v1.bak").read_text()) == v1
     assert [r.scene for r in load_records(path)] == ["coffee", "gym", "street"]

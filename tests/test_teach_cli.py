@@ -178,3 +178,15 @@ def test_teach_survives_the_controller_killed_while_idle(tmp_path):
     lost = [line for line in out.splitlines() if "the arm is disarmed" in line]
     assert len(lost) == 1 and "was lost" in lost[0], out
     assert [(r.scene, r.pose) for r in load_records(records)] == [("coffee", {"shoulder": 20.0})]
+
+
+def test_teach_records_do_not_grow_with_the_labels_taught_before(monkeypatch, capsys):
+    # Issue 13, 8: each typed record listed every scene taught before it (a zero score each), so
+    # the file grew quadratically with the labels of a session (300 labels: 116 s).
+    labels = [f"scene{i}" for i in range(40)]
+    session = "".join(f"{label}\n{i}\n" for i, label in enumerate(labels)) + "\n"
+    status, _, _ = run(["teach", "--iterations", "1"], session, monkeypatch, capsys)
+    assert status == 0
+    records = load_records()
+    assert [r.scene for r in records] == labels
+    assert all(set(r.scores["acoustic"]) == {r.scene} for r in records)

@@ -25,6 +25,7 @@ from typing import Any, Self
 import numpy as np
 from sklearn.exceptions import ConvergenceWarning, NotFittedError
 from sklearn.neural_network import MLPRegressor
+from threadpoolctl import threadpool_limits
 
 from servant_core.actions.records import SENSES, TeachRecord, label_scores
 from servant_core.errors import ServantError
@@ -157,7 +158,9 @@ class ActionLearner:
             checkpoints.append(self.max_iter)
         for checkpoint in checkpoints:
             net.set_params(max_iter=checkpoint - done)
-            with warnings.catch_warnings():
+            # One BLAS thread: these matrices are tiny, and threads fighting over a busy CPU made
+            # a 300-scene fit 20 times slower (bench/teach_records.py).
+            with warnings.catch_warnings(), threadpool_limits(1, user_api="blas"):
                 warnings.simplefilter("ignore", ConvergenceWarning)  # stopping early is the plan
                 net.fit(x, target)
             done = checkpoint

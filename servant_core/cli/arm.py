@@ -306,8 +306,7 @@ def _train(
             session.say(f"No action for {label}; nothing recorded.")
             continue
         pose, source, notes = answer
-        scenes = {r.scene for r in records}
-        record = TeachRecord(label, label_scores(label, scenes), pose, time.time(), source, notes)
+        record = TeachRecord(label, label_scores(label), pose, time.time(), source, notes)
         records = append_record(record, records_path, legacy_joint=joint)
         if link is not None and link.armed:
             _act(link, pose, session.say)
