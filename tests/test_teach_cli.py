@@ -190,3 +190,17 @@ def test_teach_records_do_not_grow_with_the_labels_taught_before(monkeypatch, ca
     records = load_records()
     assert [r.scene for r in records] == labels
     assert all(set(r.scores["acoustic"]) == {r.scene} for r in records)
+
+
+def test_servo_query_refuses_an_oversized_firmata_reply_in_one_line(monkeypatch, capsys):
+    # Issue 13, 2: a pin state reply of 200 data bytes ended `servo query` in an OverflowError.
+    emulator, port = start_emulator("firmata")
+    try:
+        emulator.pin_states[default_joints()[0].channel] = (1 << 1400) - 1  # 200 7-bit bytes
+        argv = ["servo", "query", "--port", port, "--protocol", "firmata"]
+        status, _, err = run(argv, "", monkeypatch, capsys)
+    finally:
+        emulator.stop()
+    assert status == 2
+    assert err.count("\n") == 1 and "not a Arduino (StandardFirmata) reply" in err
+    assert "a pin state of 200 bytes" in err
