@@ -204,3 +204,14 @@ def test_servo_query_refuses_an_oversized_firmata_reply_in_one_line(monkeypatch,
     assert status == 2
     assert err.count("\n") == 1 and "not a Arduino (StandardFirmata) reply" in err
     assert "a pin state of 200 bytes" in err
+
+
+def test_teach_with_an_arm_of_no_joints_is_one_line(tmp_path, monkeypatch, capsys):
+    # Issue 13, 8: `"joints": []` ended `servant teach` in an IndexError.
+    settings = tmp_path / "settings.json"
+    settings.write_text('{"joints": []}')
+    status, _, err = run(
+        ["teach", "--settings", str(settings)], "coffee\n1\n\n", monkeypatch, capsys
+    )
+    assert status == 2 and err.count("\n") == 1
+    assert "the arm needs at least one joint" in err
