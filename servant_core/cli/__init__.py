@@ -35,19 +35,35 @@ OPTION_HINTS = {
 }
 
 
+class DefaultsFormatter(argparse.HelpFormatter):
+    """Shows an option's default after its help, unless there is none to show (None, a flag's
+    False) or the help already says it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        shown = action.default not in (None, False, argparse.SUPPRESS, [])
+        if shown and "default" not in text and action.option_strings:
+            text += " (default: %(default)s)"
+        return text
+
+
 class ServantParser(argparse.ArgumentParser):
     """Every (sub)command's `--help` shows the defaults; a misplaced option gets a hint."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
-        kwargs.setdefault("formatter_class", argparse.ArgumentDefaultsHelpFormatter)
+        kwargs.setdefault("formatter_class", DefaultsFormatter)
         super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> Any:
+        """One line, as for every other error (argparse would print the usage first)."""
+        hints: list[str] = []
         if message.startswith("unrecognized arguments"):
             words = [w.split("=")[0] for w in message.split(":", 1)[-1].split()]
             hints = [OPTION_HINTS[w] for w in words if w in OPTION_HINTS]
-            message = "; ".join([message, *dict.fromkeys(hints)])
-        super().error(message)
+        hints.append(f"see `{self.prog} --help`")
+        command = self.prog.removeprefix("servant").strip()
+        where = f"{command}: " if command else ""
+        self.exit(2, f"servant: error: {where}{'; '.join([message, *dict.fromkeys(hints)])}\n")
 
 
 def build_parser() -> argparse.ArgumentParser:

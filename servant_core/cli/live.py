@@ -30,10 +30,24 @@ from servant_core.events import (
 )
 from servant_core.storage import default_model_file
 
+RUN_DESCRIPTION = (
+    "Listen and look through the microphone and camera, recognise the scene and move the arm "
+    "to the pose taught for it. Opens the terminal application; with --headless, prints one "
+    'line per event instead ("CoffeeScene detected", what was heard and seen). Stop with Ctrl-C '
+    "or --duration."
+)
+DEMO_DESCRIPTION = (
+    "A walk through built-in scenes (a café, a gym, a street), made up on the spot: no "
+    "microphone, camera or arm needed. Opens the terminal application; with --headless, prints "
+    "one line per event instead. Stop with Ctrl-C or --duration."
+)
+
 
 def register(subparsers: Any) -> None:
     run = subparsers.add_parser(
-        "run", help="recognise scenes from the live microphone and camera", description=__doc__
+        "run",
+        help="recognise scenes from the live microphone and camera",
+        description=RUN_DESCRIPTION,
     )
     run.add_argument(
         "--model",
@@ -52,7 +66,7 @@ def register(subparsers: Any) -> None:
     demo = subparsers.add_parser(
         "demo",
         help="the built-in demo scenes (no microphone or camera needed)",
-        description=__doc__,
+        description=DEMO_DESCRIPTION,
     )
     demo.add_argument("--seed", type=int, default=0, help="seed of the synthesised scenes")
     demo.add_argument(
