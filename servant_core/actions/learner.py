@@ -271,7 +271,15 @@ class ActionLearner:
                 arrays = {name: npz[name] for name in npz.files}
             header = json.loads(str(arrays.pop("header")))
             fmt, version = header["format"], header["version"]
-        except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile, EOFError) as exc:
+        except (
+            OSError,
+            ValueError,
+            KeyError,
+            TypeError,
+            RecursionError,
+            zipfile.BadZipFile,
+            EOFError,
+        ) as exc:
             raise ServantError(
                 f"{path}: not a Servant action learner (corrupt or another format)"
             ) from exc

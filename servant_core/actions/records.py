@@ -24,6 +24,7 @@ FORMAT = "servant-teach-records"
 VERSION = 2
 SENSES = ("acoustic", "visual")
 SOURCES = ("typed", "recorded", "perceived")
+MAX_FILE_BYTES = 64 << 20  # some 300,000 records: far more than anyone teaches
 
 
 @dataclass(frozen=True)
@@ -83,16 +84,18 @@ def _record(raw: Any) -> TeachRecord:
     if source not in SOURCES:
         raise ValueError(f"source {source!r} is unknown")
     t = raw.get("t", 0.0)
-    if not isinstance(t, int | float):
+    if isinstance(t, bool) or not isinstance(t, int | float) or not math.isfinite(t):
         raise ValueError("t is not a time")
     notes = raw.get("notes", [])
+    if not isinstance(notes, list) or not all(isinstance(n, str) for n in notes):
+        raise ValueError("notes must be a list of texts")
     return TeachRecord(
         scene=scene,
         scores={s: _finite_map(v, f"scores[{s!r}]") for s, v in scores.items()},
         pose=_finite_map(raw.get("pose"), "pose"),
         t=float(t),
         source=source,
-        notes=[str(n) for n in notes] if isinstance(notes, list) else [],
+        notes=list(notes),
     )
 
 
@@ -113,7 +116,13 @@ def _migrate_v1(raw_records: Sequence[Any], legacy_joint: str) -> list[dict[str,
 def _read(path: Path, legacy_joint: str) -> tuple[int, list[TeachRecord]]:
     fix = "fix or move the file away (Servant never overwrites it)"
     try:
+        if path.stat().st_size > MAX_FILE_BYTES:
+            raise ServantError(f"{path}: too big for a teach record file; {fix}")
         data = json.loads(path.read_text(encoding="utf-8"))
+    except RecursionError as exc:
+        raise ServantError(
+            f"{path}: not a readable teach record file (nested too deeply); {fix}"
+        ) from exc
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ServantError(f"{path}: not a readable teach record file ({exc}); {fix}") from exc
     if not isinstance(data, Mapping) or data.get("format") != FORMAT:
