@@ -215,3 +215,39 @@ def test_teach_with_an_arm_of_no_joints_is_one_line(tmp_path, monkeypatch, capsy
     )
     assert status == 2 and err.count("\n") == 1
     assert "the arm needs at least one joint" in err
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("timeout", ["nan", "inf", "0", "-1", "1e9"])
+def test_servo_query_refuses_a_timeout_that_would_hang(timeout, capsys):
+    # Issue 13, 7: `--timeout nan` made a deadline that never comes; a silent controller hung.
+    emulator, port = start_emulator("maestro", fault="silent")
+    try:
+        with pytest.raises(SystemExit) as info:
+            main(["servo", "query", "--port", port, "--timeout", timeout])
+    finally:
+        emulator.stop()
+    assert info.value.code == 2
+    assert "argument --timeout" in capsys.readouterr().err
+
+
+def test_teach_dry_run_refuses_recordings_that_never_end(tmp_path):
+    # Issue 13, 7: `record nan` looped for ever, growing memory; `record 1e9` died in
+    # MemoryError. Run in a child process with bounded memory and time, so a regression fails
+    # instead of taking the machine down.
+    script = "coffee\nrecord nan\nrecord 1e9\nrecord inf\nrecord 0.3\n\n"
+    limit = "import resource; resource.setrlimit(resource.RLIMIT_AS, (2 << 30, 2 << 30)); "
+    code = limit + "from servant_tui.main import main; raise SystemExit(main())"
+    argv = ["teach", "--dry-run", "--iterations", "5", "--records", str(tmp_path / "r.json")]
+    argv += ["--learner", str(tmp_path / "l.npz")]
+    proc = subprocess.run(
+        [sys.executable, "-c", code, *argv],
+        input=script,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.count("a recording must be 0 to 600 seconds") == 3
+    assert "Recording for 0.3 s" in proc.stdout
+    assert [r.source for r in load_records(tmp_path / "r.json")] == ["recorded"]
