@@ -63,7 +63,8 @@ class ServantParser(argparse.ArgumentParser):
         hints.append(f"see `{self.prog} --help`")
         command = self.prog.removeprefix("servant").strip()
         where = f"{command}: " if command else ""
-        self.exit(2, f"servant: error: {where}{'; '.join([message, *dict.fromkeys(hints)])}\n")
+        text = "; ".join([message, *dict.fromkeys(hints)])
+        self.exit(2, f"servant: error: {where}{one_line(text)}\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -84,6 +85,11 @@ def emit(args: argparse.Namespace, payload: Any, text: str) -> None:
         print(json.dumps(payload, indent=2, default=_json_default))
     else:
         print(printable(text, sys.stdout))
+
+
+def one_line(text: str) -> str:
+    """`text` with control characters (a file name may hold a newline) shown as escapes."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def printable(text: str, stream: Any) -> str:
@@ -109,7 +115,7 @@ def run_handler(args: argparse.Namespace) -> int:
         try:
             return int(args.handler(args) or 0)
         except ServantError as error:
-            print(f"servant: error: {error}", file=sys.stderr)
+            print(f"servant: error: {one_line(str(error))}", file=sys.stderr)
             return 2
         except KeyboardInterrupt:
             return 130

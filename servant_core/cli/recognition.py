@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any, cast
 
 from servant_core.audio import DEFAULT_RATE, DEFAULT_WINDOW_SECONDS, cut_windows, read_audio
-from servant_core.cli import emit, options
+from servant_core.cli import emit, one_line, options
 from servant_core.engine import FRESH_METHODS
 from servant_core.errors import ServantError
 from servant_core.evaluate import (
@@ -184,7 +184,7 @@ def _fusion_config(args: argparse.Namespace) -> FusionConfig:
 
 
 def _warn(error: ServantError) -> None:
-    print(f"servant: warning: skipped {error}", file=sys.stderr)
+    print(f"servant: warning: skipped {one_line(str(error))}", file=sys.stderr)
 
 
 def _library(root: Path, scenes: str | None) -> SceneLibrary:
@@ -347,7 +347,14 @@ def cmd_eval_audio(args: argparse.Namespace) -> int:
     library = _library(args.root, args.scenes)
     if args.protocol == "recording":
         _check_recording_protocol(library)
-    result = evaluate_audio(library, args.method, args.protocol, _audio_params(args), _warn)
+    result = evaluate_audio(
+        library,
+        args.method,
+        args.protocol,
+        _audio_params(args),
+        _warn,
+        Progress("listening to recordings"),
+    )
     emit(args, result, _format_scores(result))
     return 0
 
