@@ -112,6 +112,7 @@ class ServoLink:
         clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], None] = time.sleep,
         on_bytes: Callable[[bytes], None] | None = None,
+        reconnect_every: float = RECONNECT_EVERY_S,
     ) -> None:
         self.protocol = protocol
         self.joints = {j.name: j for j in joints}
@@ -130,7 +131,8 @@ class ServoLink:
         self.notes: list[str] = []  # what the last `move_to` had to clamp
         self._commanded_at = 0.0
         self._serial: serial.Serial | None = None
-        self._last_attempt = -RECONNECT_EVERY_S
+        self.reconnect_every = reconnect_every
+        self._last_attempt = -math.inf
         self._lock = threading.RLock()
 
     @classmethod
@@ -177,12 +179,12 @@ class ServoLink:
             raise
 
     def reconnect(self) -> bool:
-        """Reopen a lost port if it is back (tried at most once a second), still disarmed."""
+        """Reopen a lost port if it is back (tried at most every `reconnect_every` s), disarmed."""
         with self._lock:
             if self.connected:
                 return True
             now = time.monotonic()
-            if now - self._last_attempt < RECONNECT_EVERY_S:
+            if now - self._last_attempt < self.reconnect_every:
                 return False
             self._last_attempt = now
             try:
