@@ -60,10 +60,16 @@ def seconds(value: object, what: str, most: float, *, zero: bool = False) -> flo
     return float(number)
 
 
-def open_serial(port: str, baudrate: int) -> serial.Serial:
-    """Open `port` exclusively, or say in one line why it cannot be opened."""
+def open_serial(port: str, baudrate: int) -> serial.SerialBase:
+    """Open `port` exclusively, or say in one line why it cannot be opened.
+
+    `port` is a device (/dev/ttyACM0, COM3) or a pyserial URL: `socket://host:port` reaches a
+    controller behind a network bridge, `loop://` and handlers of one's own serve tests.
+    """
     try:
-        return serial.Serial(port, baudrate, timeout=POLL_S, write_timeout=1.0, exclusive=True)
+        return serial.serial_for_url(
+            port, baudrate, timeout=POLL_S, write_timeout=1.0, exclusive=True
+        )
     except (serial.SerialException, OSError, ValueError) as exc:
         code = getattr(exc, "errno", None)
         text = str(exc)
@@ -130,7 +136,7 @@ class ServoLink:
         self.goal: dict[str, float] = {}
         self.notes: list[str] = []  # what the last `move_to` had to clamp
         self._commanded_at = 0.0
-        self._serial: serial.Serial | None = None
+        self._serial: serial.SerialBase | None = None
         self.reconnect_every = reconnect_every
         self._last_attempt = -math.inf
         self._lock = threading.RLock()
@@ -222,7 +228,7 @@ class ServoLink:
         handle = self._require_serial()
         self._io(lambda: (handle.write(data), handle.flush()))
 
-    def _require_serial(self) -> serial.Serial:
+    def _require_serial(self) -> serial.SerialBase:
         if self._serial is None and not self.reconnect():
             raise ServantError(
                 f"{self.port}: the {self.protocol.title} is not connected; "
