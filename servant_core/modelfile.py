@@ -137,13 +137,18 @@ def _read_member(path: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo) ->
         raise _damaged(path, f"{info.filename} claims {info.file_size} bytes")
     fmt = np.lib.format
     with archive.open(info) as member:
-        version = fmt.read_magic(member)
-        if version == (1, 0):
-            shape, _, dtype = fmt.read_array_header_1_0(member)
-        elif version == (2, 0):
-            shape, _, dtype = fmt.read_array_header_2_0(member)
-        else:
-            raise _damaged(path, f"{info.filename} has array format {version}")
+        try:
+            version = fmt.read_magic(member)
+            if version == (1, 0):
+                shape, _, dtype = fmt.read_array_header_1_0(member)
+            elif version == (2, 0):
+                shape, _, dtype = fmt.read_array_header_2_0(member)
+            else:
+                raise ValueError(f"array format {version}")
+        except (zipfile.BadZipFile, EOFError):
+            raise
+        except Exception:  # numpy parses the header as Python: TokenError, SyntaxError...
+            raise _damaged(path, f"{info.filename} has a bad array header") from None
         # The array must fit in what the member declares (zipfile never inflates beyond that):
         # numpy would otherwise allocate whatever the array header claims first.
         if dtype.hasobject:

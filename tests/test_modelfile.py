@@ -231,3 +231,14 @@ def test_saving_into_a_folder_or_a_read_only_place_is_one_line(tmp_path):
     with pytest.raises(ServantError, match="cannot save the model") as info:
         save_model("/proc/servant-model.npz", {"visual": fitted_visual()})  # read-only for root too
     assert "\n" not in str(info.value)
+
+
+def test_an_array_header_numpy_cannot_tokenize_is_refused(tmp_path):
+    """Found by the fuzz suite in the member check: one byte changed to `#` makes numpy's header
+    parser raise tokenize.TokenError."""
+    path = save_model(tmp_path / "m.npz", {"visual": fitted_visual()})
+    data = bytearray(path.read_bytes())
+    at = data.index(b"'fortran_order':")
+    data[at + len("'fortran_order'")] = ord("#")
+    path.write_bytes(bytes(data))
+    refused_in_one_line(path, "bad array header|not a Servant model file")
