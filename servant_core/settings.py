@@ -189,7 +189,7 @@ def load_settings(path: str | Path | None = None) -> Settings:
     known = {f.name for f in fields(Settings)}
     unknown = sorted(set(data) - known)
     if unknown:
-        raise ServantError(f"{path}: unknown setting(s) {', '.join(unknown)}; {fix}")
+        raise ServantError(f"{path}: unknown setting(s) {', '.join(map(repr, unknown))}; {fix}")
     try:
         if "joints" in data:
             data["joints"] = _joints(data["joints"])
@@ -215,7 +215,7 @@ def _joints(raw: Any) -> list[Joint]:
         unknown = sorted(set(joint) - set(names))
         if missing or unknown:
             what = [f"no {', '.join(missing)}"] if missing else []
-            what += [f"unknown field(s) {', '.join(unknown)}"] if unknown else []
+            what += [f"unknown field(s) {', '.join(map(repr, unknown))}"] if unknown else []
             raise ValueError(f"joint {i} is malformed ({'; '.join(what)})")
         joints.append(Joint(**joint))
     return joints
