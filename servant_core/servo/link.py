@@ -60,6 +60,13 @@ def seconds(value: object, what: str, most: float, *, zero: bool = False) -> flo
     return float(number)
 
 
+def _reason(exc: BaseException) -> str:
+    """The words of a port error: termios.error carries `(errno, text)`, shown as a tuple."""
+    if len(exc.args) == 2 and isinstance(exc.args[1], str):
+        return exc.args[1]
+    return str(exc)
+
+
 def open_serial(port: str, baudrate: int) -> serial.SerialBase:
     """Open `port` exclusively, or say in one line why it cannot be opened.
 
@@ -215,8 +222,8 @@ class ServoLink:
         except PORT_ERRORS as exc:
             self._drop()
             raise ServantError(
-                f"{self.port}: the link to the {self.protocol.title} was lost ({exc}); the arm is "
-                "disarmed; reconnect the controller, then arm again"
+                f"{self.port}: the link to the {self.protocol.title} was lost ({_reason(exc)}); "
+                "the arm is disarmed; reconnect the controller, then arm again"
             ) from exc
 
     def _send(self, data: bytes) -> None:
