@@ -230,3 +230,14 @@ def test_an_emulator_stopped_while_idle_disarms_the_link():
         link.read_positions()
     assert not link.armed and not link.connected
     link.close()
+
+
+def test_a_file_that_is_not_a_serial_port_is_said(tmp_path):
+    for port in ("/dev/null", str(tmp_path)):
+        with pytest.raises(ServantError, match="not a serial port"):
+            ServoLink.open(port, "maestro", JOINTS)
+
+
+def test_an_emulator_link_that_cannot_be_made_is_one_clear_error(tmp_path):
+    with pytest.raises(ServantError, match="cannot make it a link to the emulator's port"):
+        start_emulator("maestro", link=tmp_path / "no-such-folder" / "servo0")

@@ -303,11 +303,19 @@ class ServoEmulator:
         self._fds = (master, slave)
         self.port = os.ttyname(slave)
         if link is not None:
-            self._link = Path(link)
-            tmp = self._link.with_name(f".{self._link.name}.tmp")
-            tmp.unlink(missing_ok=True)
-            tmp.symlink_to(self.port)
-            os.replace(tmp, self._link)
+            path = Path(link)
+            tmp = path.with_name(f".{path.name}.tmp")
+            try:
+                tmp.unlink(missing_ok=True)
+                tmp.symlink_to(self.port)
+                os.replace(tmp, path)
+            except OSError as exc:
+                self.stop()
+                raise ServantError(
+                    f"{path}: cannot make it a link to the emulator's port ({exc.strerror}); "
+                    "give a path in a folder you can write to"
+                ) from exc
+            self._link = path
         self._stop.clear()
         self._thread = threading.Thread(
             target=self._serve, name=f"servo-emulator-{self.protocol}", daemon=True

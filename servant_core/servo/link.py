@@ -88,6 +88,8 @@ def open_serial(port: str, baudrate: int) -> serial.SerialBase:
             reason = "the port is busy: another program has it open; close it and try again"
         elif code == errno.EACCES or "Permission denied" in text:
             reason = "permission denied; add yourself to the `dialout` group or fix the port's mode"
+        elif code in (errno.ENOTTY, errno.EISDIR) or "Inappropriate ioctl" in text:
+            reason = "not a serial port; `servant servo list-ports` lists the ports there are"
         else:
             reason = f"cannot open the port ({text})"
         raise ServantError(f"{port}: {reason}") from exc
