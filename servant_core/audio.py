@@ -109,27 +109,34 @@ def _too_long(path: Path) -> ServantError:
 
 
 def _decode_mono(path: Path, handle: BinaryIO, info: Any) -> np.ndarray:
+    """Decode block by block into one mono array sized from the header (a list of blocks and
+    their concatenation would hold the recording twice); a header that under-states the
+    length still gets the rest, up to the limit."""
     limit = int(MAX_RECORDING_SECONDS * info.samplerate)
-    blocks: list[np.ndarray] = []
+    mono = np.empty(max(info.frames, 0), dtype=np.float32)
+    beyond: list[np.ndarray] = []
     decoded = 0
     try:
         with sf.SoundFile(handle) as audio:
             for block in audio.blocks(BLOCK_FRAMES, dtype="float32", always_2d=True):
-                mono = to_mono(block)
-                if not np.all(np.isfinite(mono)):
+                samples = to_mono(block)
+                if not np.all(np.isfinite(samples)):
                     raise ServantError(
                         f"{path}: holds samples that are not numbers (NaN or infinity); "
                         "the file is damaged, record it again"
                     )
-                decoded += len(mono)
-                if decoded > limit:  # the header under-stated the length
+                if decoded + len(samples) > limit:
                     raise _too_long(path)
-                blocks.append(mono)
+                fits = max(0, min(len(samples), len(mono) - decoded))
+                mono[decoded : decoded + fits] = samples[:fits]
+                if fits < len(samples):
+                    beyond.append(samples[fits:])
+                decoded += len(samples)
     except (sf.LibsndfileError, RuntimeError, ValueError, TypeError, OSError) as exc:
         raise _not_readable(path, first_line(exc)) from None
     if decoded == 0:
         raise ServantError(f"{path}: the audio file is empty; record it again")
-    return np.concatenate(blocks)
+    return np.concatenate([mono, *beyond]) if beyond else mono[:decoded]
 
 
 def first_line(exc: BaseException) -> str:
