@@ -19,6 +19,7 @@ from servant_core.audio import (
     DEFAULT_WINDOW_SECONDS,
     cut_windows,
     open_regular_file,
+    os_reason,
     read_audio,
 )
 from servant_core.errors import ServantError
@@ -59,6 +60,15 @@ class SceneLibrary:
         root = Path(root)
         if not root.is_dir():
             raise ServantError(f"{root}: no such scene library (expected ROOT/<scene>/<files>)")
+        try:
+            return cls._scan(root)
+        except OSError as exc:
+            raise ServantError(
+                f"{exc.filename or root}: cannot read the scene library ({os_reason(exc)})"
+            ) from None
+
+    @classmethod
+    def _scan(cls, root: Path) -> SceneLibrary:
         scenes: list[str] = []
         recordings: list[Recording] = []
         pictures: list[Picture] = []

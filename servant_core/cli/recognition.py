@@ -373,8 +373,6 @@ def _check_recording_protocol(library: SceneLibrary) -> None:
 
 
 def cmd_eval_image(args: argparse.Namespace) -> int:
-    if not 0.0 < args.split < 1.0:
-        raise ServantError("--split must be between 0 and 1")
     test = _library(args.test, args.scenes) if args.test else None
     result = evaluate_image(
         _library(args.root, args.scenes), test, args.method, args.split, on_error=_warn
