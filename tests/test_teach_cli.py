@@ -251,3 +251,15 @@ def test_teach_dry_run_refuses_recordings_that_never_end(tmp_path):
     assert proc.stdout.count("a recording must be 0 to 600 seconds") == 3
     assert "Recording for 0.3 s" in proc.stdout
     assert [r.source for r in load_records(tmp_path / "r.json")] == ["recorded"]
+
+
+@pytest.mark.parametrize(
+    ("option", "what"), [("--records", "teach records"), ("--learner", "action learner")]
+)
+def test_teach_files_that_cannot_be_saved_are_one_line(option, what, monkeypatch, capsys):
+    # Issue 13, 6 (on the arm's side): nowhere to write ended in a traceback. /proc takes no new
+    # files, even for root (a read-only folder would not stop root).
+    argv = ["teach", "--iterations", "2", option, "/proc/servant-nowhere/file"]
+    status, _, err = run(argv, "coffee\n1\n\n", monkeypatch, capsys)
+    assert status == 2 and err.count("\n") == 1
+    assert f"cannot save the {what} (No such file or directory)" in err

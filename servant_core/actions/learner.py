@@ -28,6 +28,7 @@ from sklearn.neural_network import MLPRegressor
 from threadpoolctl import threadpool_limits
 
 from servant_core.actions.records import SENSES, TeachRecord, label_scores
+from servant_core.audio import os_reason
 from servant_core.errors import ServantError
 from servant_core.recognisers.base import UNKNOWN
 from servant_core.storage import atomic_save_npz, data_dir
@@ -257,7 +258,13 @@ class ActionLearner:
             "y_scale": self.y_scale_,
             "header": np.array(json.dumps(header)),
         }
-        return atomic_save_npz(path, arrays)
+        try:
+            return atomic_save_npz(path, arrays)
+        except OSError as exc:
+            raise ServantError(
+                f"{path}: cannot save the action learner ({os_reason(exc)}); the previous file "
+                "is unchanged; check that its folder can be written to and has space"
+            ) from None
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> ActionLearner:

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from servant_core.audio import os_reason
 from servant_core.errors import ServantError
 from servant_core.storage import atomic_write_bytes, atomic_write_text, data_dir
 
@@ -172,7 +173,13 @@ def encode_records(records: Sequence[TeachRecord]) -> str:
 
 def save_records(records: Sequence[TeachRecord], path: str | Path | None = None) -> Path:
     path = Path(path) if path is not None else default_records_path()
-    return atomic_write_text(path, encode_records(records))
+    try:
+        return atomic_write_text(path, encode_records(records))
+    except OSError as exc:
+        raise ServantError(
+            f"{path}: cannot save the teach records ({os_reason(exc)}); the file is unchanged; "
+            "check that its folder can be written to and has space"
+        ) from None
 
 
 def append_record(
@@ -185,7 +192,13 @@ def append_record(
     if version < VERSION:
         backup = path.with_name(f"{path.name}.v{version}.bak")
         if not backup.exists():
-            atomic_write_bytes(backup, path.read_bytes())
+            try:
+                atomic_write_bytes(backup, path.read_bytes())
+            except OSError as exc:
+                raise ServantError(
+                    f"{backup}: cannot keep the old teach records ({os_reason(exc)}); nothing "
+                    "was changed; check that the folder can be written to and has space"
+                ) from None
     records.append(record)
     save_records(records, path)
     return records
