@@ -48,6 +48,7 @@ class ScriptedPort(LoopSerial):
     def from_url(self, url: str) -> None:
         self.script = url.split("://", 1)[1].split("/")
         self.gone = False
+        self.queue.maxsize = 0  # a controller may answer more than loop://'s 4 KiB
 
     def _check(self) -> None:
         if self.gone:
@@ -181,3 +182,16 @@ def test_the_link_survives_any_reply_from_a_controller(protocol, script, pose, v
     for _, channel, pulse in decoder.history():
         joint = BY_CHANNEL[channel]
         assert joint.min_pulse_us - 0.5 <= pulse <= joint.max_pulse_us + 0.5
+
+
+def test_a_controller_that_never_stops_talking_is_cut_short():
+    # Messages the link skips (Firmata analog reports), more than any reply: refused, not kept
+    # until the deadline (a fast line would fill memory first).
+    reports = bytes([0xE0, 0x01, 0x02]) * 3000
+    script = [valid_replies("firmata")[0].hex(), "", reports.hex()]
+    link = ServoLink.open("script://" + "/".join(script), "firmata", JOINTS, timeout=30.0)
+    with link:
+        started = time.monotonic()
+        with pytest.raises(ServantError, match="bytes and still no complete reply"):
+            link.read_positions()
+        assert time.monotonic() - started < 10.0
