@@ -137,6 +137,7 @@ def featurize_library_audio(
     library: SceneLibrary,
     model: AcousticRecogniser,
     on_error: Callable[[ServantError], None] | None = None,
+    on_progress: Callable[[int, int], None] | None = None,
 ) -> WindowFeatures:
     return featurize_recordings(
         library.recordings,
@@ -144,6 +145,7 @@ def featurize_library_audio(
         model.rate,
         model.window_seconds,
         on_error,
+        on_progress,
     )
 
 
@@ -153,12 +155,13 @@ def evaluate_audio(
     protocol: str = "temporal",
     params: dict[str, Any] | None = None,
     on_error: Callable[[ServantError], None] | None = None,
+    on_progress: Callable[[int, int], None] | None = None,
 ) -> dict[str, Any]:
     if protocol not in PROTOCOLS:
         raise ServantError(f"unknown protocol {protocol!r}; choose temporal or recording")
     params = params or {}
     probe = make_audio_recogniser(method, **params)
-    wf = featurize_library_audio(library, probe, on_error)
+    wf = featurize_library_audio(library, probe, on_error, on_progress)
     preds = Predictions([], [], [])
     tested: list[np.ndarray] = []  # the recording of each test window, in prediction order
     skipped: list[str] = []

@@ -18,11 +18,21 @@ from servant_core.audio import (
     DEFAULT_RATE,
     DEFAULT_WINDOW_SECONDS,
     cut_windows,
+    open_regular_file,
+    os_reason,
     read_audio,
 )
 from servant_core.errors import ServantError
+from servant_core.recognisers.base import UNKNOWN
 
 PICTURE_SUFFIXES = (".png", ".jpg", ".jpeg")
+# A webcam frame is under 1 Mpx and a phone photo under 50 Mpx; a header claiming more is
+# damaged or hostile (a 1 MB PNG can claim gigabytes). Checked before decoding.
+MAX_PICTURE_PIXELS = 50_000_000
+MAX_PICTURE_BYTES = 64 * 1024 * 1024
+
+ProgressCallback = Callable[[int, int], None]
+"""`on_progress(done, total)`: called after each file of a long step (done counts from 1)."""
 
 
 @dataclass(frozen=True)
@@ -50,12 +60,26 @@ class SceneLibrary:
         root = Path(root)
         if not root.is_dir():
             raise ServantError(f"{root}: no such scene library (expected ROOT/<scene>/<files>)")
+        try:
+            return cls._scan(root)
+        except OSError as exc:
+            raise ServantError(
+                f"{exc.filename or root}: cannot read the scene library ({os_reason(exc)})"
+            ) from None
+
+    @classmethod
+    def _scan(cls, root: Path) -> SceneLibrary:
         scenes: list[str] = []
         recordings: list[Recording] = []
         pictures: list[Picture] = []
         for scene_dir in sorted(
             p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")
         ):
+            if scene_dir.name == UNKNOWN:
+                raise ServantError(
+                    f"{scene_dir}: the scene name {UNKNOWN} means a place Servant does not know "
+                    "and can never be detected; rename the folder"
+                )
             scenes.append(scene_dir.name)
             for path in sorted(scene_dir.rglob("*")):
                 if path.name.startswith(".") or not path.is_file():
@@ -97,11 +121,13 @@ def iter_recording_windows(
     rate: int = DEFAULT_RATE,
     seconds: float = DEFAULT_WINDOW_SECONDS,
     on_error: Callable[[ServantError], None] | None = None,
+    on_progress: ProgressCallback | None = None,
 ) -> Iterator[tuple[int, Recording, np.ndarray]]:
     """Yield (index, recording, windows) one recording at a time, so memory holds one only.
 
     A recording that cannot be read, or is shorter than one window, is passed to `on_error`
-    (and skipped) when given; otherwise it raises.
+    (and skipped) when given; otherwise it raises. `on_progress(done, total)` is called once
+    each recording is done with: skipped, or after the caller has used its windows.
     """
     for index, recording in enumerate(recordings):
         try:
@@ -114,8 +140,10 @@ def iter_recording_windows(
             if on_error is None:
                 raise
             on_error(error)
-            continue
-        yield index, recording, windows
+        else:
+            yield index, recording, windows
+        if on_progress is not None:
+            on_progress(index + 1, len(recordings))
 
 
 def featurize_recordings(
@@ -124,13 +152,19 @@ def featurize_recordings(
     rate: int = DEFAULT_RATE,
     seconds: float = DEFAULT_WINDOW_SECONDS,
     on_error: Callable[[ServantError], None] | None = None,
+    on_progress: ProgressCallback | None = None,
 ) -> WindowFeatures:
-    """Cut every recording into windows and featurize them, one recording at a time."""
+    """Cut every recording into windows and featurize them, one recording at a time.
+
+    `on_progress(done, total)` is called after each recording (skipped ones count as done).
+    """
     parts: list[np.ndarray] = []
     scenes: list[str] = []
     rec_ids: list[int] = []
     positions: list[int] = []
-    for index, recording, windows in iter_recording_windows(recordings, rate, seconds, on_error):
+    for index, recording, windows in iter_recording_windows(
+        recordings, rate, seconds, on_error, on_progress
+    ):
         parts.append(featurize(windows))
         scenes += [recording.scene] * len(windows)
         rec_ids += [index] * len(windows)
@@ -159,30 +193,96 @@ def _concatenate_releasing(parts: list[np.ndarray]) -> np.ndarray:
 
 
 def read_picture(path: str | Path) -> np.ndarray:
-    """Read a picture as a BGR uint8 array (OpenCV's order); a non-picture raises ServantError."""
+    """Read a PNG or JPEG picture as a BGR uint8 array (OpenCV's order).
+
+    Its size is read from the header before decoding; anything else, or a picture over
+    MAX_PICTURE_PIXELS, raises one clear ServantError.
+    """
     path = Path(path)
-    data = np.fromfile(str(path), dtype=np.uint8) if path.is_file() else None
-    if data is None:
-        raise ServantError(f"{path}: no such picture")
-    image = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
-    if image is None:
-        raise ServantError(f"{path}: not a picture OpenCV can read; use PNG or JPEG")
+    with open_regular_file(path, "picture") as handle:
+        try:
+            data = handle.read(MAX_PICTURE_BYTES + 1)
+        except OSError as exc:
+            raise ServantError(f"{path}: cannot read the picture ({exc.strerror})") from None
+    if len(data) > MAX_PICTURE_BYTES:
+        raise ServantError(
+            f"{path}: larger than {MAX_PICTURE_BYTES >> 20} MB; use a smaller picture"
+        )
+    size = picture_size(data)
+    if size is None:
+        raise ServantError(f"{path}: not a PNG or JPEG picture (or a damaged one); use PNG or JPEG")
+    width, height = size
+    if width * height > MAX_PICTURE_PIXELS:
+        raise ServantError(
+            f"{path}: {width}×{height} pixels is more than {MAX_PICTURE_PIXELS // 1_000_000} "
+            "megapixels (a damaged header?); use a smaller picture"
+        )
+    try:
+        image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_COLOR)
+    except cv2.error:
+        image = None
+    if image is None or image.size == 0:
+        raise ServantError(f"{path}: a damaged picture OpenCV cannot decode; take it again")
     return image
 
 
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+# JPEG start-of-frame markers (baseline, progressive, lossless, arithmetic): they carry the size.
+JPEG_FRAME_MARKERS = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
+
+
+def picture_size(data: bytes) -> tuple[int, int] | None:
+    """(width, height) from a PNG or JPEG header without decoding it; None for anything else
+    (OpenCV would decode other formats by content whatever the file is called)."""
+    if data.startswith(PNG_SIGNATURE):
+        if len(data) < 24 or data[12:16] != b"IHDR":
+            return None
+        width, height = int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+        return (width, height) if width and height else None
+    if not data.startswith(b"\xff\xd8"):
+        return None
+    at = 2
+    while at + 4 <= len(data):
+        if data[at] != 0xFF:
+            return None
+        marker = data[at + 1]
+        if marker == 0xFF:  # fill byte
+            at += 1
+            continue
+        if marker in (0x01, *range(0xD0, 0xD8)):  # markers without a length
+            at += 2
+            continue
+        length = int.from_bytes(data[at + 2 : at + 4], "big")
+        if marker in JPEG_FRAME_MARKERS:
+            if length < 7 or at + 9 > len(data):
+                return None
+            height = int.from_bytes(data[at + 5 : at + 7], "big")
+            width = int.from_bytes(data[at + 7 : at + 9], "big")
+            return (width, height) if width and height else None
+        if marker == 0xDA or length < 2:  # image data before any frame header
+            return None
+        at += 2 + length
+    return None
+
+
 def read_pictures(
-    pictures: Sequence[Picture], on_error: Callable[[ServantError], None] | None = None
+    pictures: Sequence[Picture],
+    on_error: Callable[[ServantError], None] | None = None,
+    on_progress: ProgressCallback | None = None,
 ) -> tuple[list[np.ndarray], list[Picture]]:
-    """Read pictures, skipping (and reporting through `on_error`) those that cannot be read."""
+    """Read pictures, skipping (and reporting through `on_error`) those that cannot be read;
+    `on_progress(done, total)` after each."""
     images: list[np.ndarray] = []
     kept: list[Picture] = []
-    for picture in pictures:
+    for done, picture in enumerate(pictures, start=1):
         try:
             images.append(read_picture(picture.path))
         except ServantError as error:
             if on_error is None:
                 raise
             on_error(error)
-            continue
-        kept.append(picture)
+        else:
+            kept.append(picture)
+        if on_progress is not None:
+            on_progress(done, len(pictures))
     return images, kept

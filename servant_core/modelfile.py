@@ -8,18 +8,53 @@ is stored as a 0-d unicode array named `header`; a recogniser's arrays are store
 from __future__ import annotations
 
 import json
+import math
+import typing
 import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from servant_core.audio import (
+    MAX_RATE,
+    MAX_WINDOW_SECONDS,
+    MIN_RATE,
+    MIN_WINDOW_SECONDS,
+    first_line,
+    open_regular_file,
+    os_reason,
+)
 from servant_core.errors import ServantError
-from servant_core.recognisers import Recogniser, methods_for
+from servant_core.recognisers import UNKNOWN, Recogniser, methods_for
 from servant_core.storage import atomic_save_npz
 
 FORMAT = "servant-model"
 VERSION = 1
+ROLE_SENSE = {"acoustic": "audio", "visual": "image"}
+
+# What a model file may hold, checked before anything is read in full. The largest real model
+# (the paper's FFT centroids, ten scenes) is about 10 MB; these limits leave ample room and keep
+# a 5 MB file that claims a 4 GB member (a zip bomb) from being inflated.
+MAX_MEMBERS = 256
+MAX_MEMBER_BYTES = 256 * 1024 * 1024
+MAX_TOTAL_BYTES = 512 * 1024 * 1024
+MAX_HEADER_CHARS = 1_000_000
+# Parameters that size the work of featurizing (a picture resized to `size`², `n_mels` bands...):
+# bounded so that a doctored header cannot ask for gigabytes. Other numbers get GENERIC_LIMIT.
+PARAM_LIMITS: dict[str, tuple[float, float]] = {
+    "rate": (MIN_RATE, MAX_RATE),
+    "window_seconds": (MIN_WINDOW_SECONDS, MAX_WINDOW_SECONDS),
+    "frame_seconds": (0.001, 1.0),
+    "fmin": (0.0, MAX_RATE / 2),
+    "fmax": (0.0, MAX_RATE / 2),
+    "n_mels": (1, 512),
+    "n_colours": (1, 64),
+    "size": (8, 2048),
+    "cell": (1, 256),
+    "n_bins": (1, 360),
+}
+GENERIC_LIMIT = (-1e9, 1e9)
 
 
 def save_model(path: str | Path, recognisers: dict[str, Recogniser]) -> Path:
@@ -36,28 +71,120 @@ def save_model(path: str | Path, recognisers: dict[str, Recogniser]) -> Path:
         for name, array in parts.items():
             arrays[f"{role}/{name}"] = np.asarray(array)
     arrays["header"] = np.array(json.dumps(header))
-    return atomic_save_npz(path, arrays)
+    path = Path(path)
+    if path.is_dir():
+        raise ServantError(f"{path}: is a folder; give a model file name such as {path}/model.npz")
+    try:
+        return atomic_save_npz(path, arrays)
+    except OSError as exc:
+        raise ServantError(
+            f"{path}: cannot save the model ({os_reason(exc)}); the previous file is unchanged, "
+            "choose another place"
+        ) from None
 
 
 def load_model(path: str | Path) -> dict[str, Recogniser]:
-    """Load a model file written by `save_model`; anything else is refused in one clear line."""
+    """Load a model file written by `save_model`; anything else is refused in one clear line.
+
+    Every size, header field and array is checked against its method before use, and each
+    recogniser must then recognise a made-up window or picture with finite numbers.
+    """
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise ServantError(
             f"{path}: no such model file; train one with `servant train ROOT -o {path}`"
         )
+    files = _read_arrays(path)
+    header = _read_header(path, files.pop("header", None))
+    recognisers: dict[str, Recogniser] = {}
+    for role, state in header["recognisers"].items():
+        prefix = f"{role}/"
+        parts = {k[len(prefix) :]: v for k, v in files.items() if k.startswith(prefix)}
+        recognisers[role] = _recogniser(path, role, state, parts)
+    return recognisers
+
+
+def _damaged(path: Path, what: str) -> ServantError:
+    return ServantError(f"{path}: damaged Servant model file ({what}); retrain the model")
+
+
+def _read_arrays(path: Path) -> dict[str, np.ndarray]:
+    """The arrays of the npz, each member's declared size checked before it is read."""
+    not_model = ServantError(f"{path}: not a Servant model file (corrupt or another format)")
+    with open_regular_file(path, "model file") as handle:
+        try:
+            with zipfile.ZipFile(handle) as archive:
+                infos = archive.infolist()
+                if len(infos) > MAX_MEMBERS or sum(i.file_size for i in infos) > MAX_TOTAL_BYTES:
+                    raise _damaged(path, "more data than any model holds")
+                return {_member_name(path, i): _read_member(path, archive, i) for i in infos}
+        except OSError as exc:
+            raise ServantError(f"{path}: cannot read the model file ({os_reason(exc)})") from None
+        except (zipfile.BadZipFile, zipfile.LargeZipFile, ValueError, EOFError, KeyError):
+            raise not_model from None
+        except NotImplementedError:  # a compression method zipfile does not have
+            raise not_model from None
+
+
+def _member_name(path: Path, info: zipfile.ZipInfo) -> str:
+    if not info.filename.endswith(".npy"):
+        raise ServantError(f"{path}: not a Servant model file (holds {info.filename!r})")
+    return info.filename[: -len(".npy")]
+
+
+def _read_member(path: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo) -> np.ndarray:
+    if info.file_size > MAX_MEMBER_BYTES:
+        raise _damaged(path, f"{info.filename} claims {info.file_size} bytes")
+    fmt = np.lib.format
+    with archive.open(info) as member:
+        try:
+            version = fmt.read_magic(member)
+            if version == (1, 0):
+                shape, _, dtype = fmt.read_array_header_1_0(member)
+            elif version == (2, 0):
+                shape, _, dtype = fmt.read_array_header_2_0(member)
+            else:
+                raise ValueError(f"array format {version}")
+        except (zipfile.BadZipFile, EOFError):
+            raise
+        except Exception:  # numpy parses the header as Python: TokenError, SyntaxError...
+            raise _damaged(path, f"{info.filename} has a bad array header") from None
+        # The array must fit in what the member declares (zipfile never inflates beyond that):
+        # numpy would otherwise allocate whatever the array header claims first.
+        if dtype.hasobject:
+            raise ServantError(
+                f"{path}: not a Servant model file (it holds pickled objects, never loaded)"
+            )
+        if math.prod(shape) * dtype.itemsize > info.file_size:
+            raise _damaged(path, f"{info.filename} has a bad array header")
+    with archive.open(info) as member:
+        return np.asarray(fmt.read_array(member, allow_pickle=False))
+
+
+def _no_nan(constant: str) -> float:
+    if constant == "NaN":
+        raise ValueError("NaN in the header")
+    return float(constant)  # Infinity: a rejection distance not measured yet
+
+
+def _read_header(path: Path, stored: np.ndarray | None) -> dict[str, Any]:
+    no_header = ServantError(f"{path}: not a Servant model file (no valid header)")
+    if stored is None or stored.shape != () or stored.dtype.kind != "U":
+        raise no_header
+    text = str(stored)
+    if len(text) > MAX_HEADER_CHARS:
+        raise _damaged(path, "a header longer than any model has")
     try:
-        with np.load(path, allow_pickle=False) as npz:
-            files = {name: npz[name] for name in npz.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise ServantError(f"{path}: not a Servant model file (corrupt or another format)") from exc
-    try:
-        header = json.loads(str(files.pop("header")))
-        fmt, version = header["format"], int(header["version"])
-    except (KeyError, ValueError, TypeError) as exc:
-        raise ServantError(f"{path}: not a Servant model file (no valid header)") from exc
+        header = json.loads(text, parse_constant=_no_nan)
+    except (ValueError, RecursionError):
+        raise no_header from None
+    if not isinstance(header, dict) or "format" not in header or "version" not in header:
+        raise no_header
+    fmt, version = header["format"], header["version"]
     if fmt != FORMAT:
-        raise ServantError(f"{path}: not a Servant model file (format {fmt!r})")
+        raise ServantError(f"{path}: not a Servant model file (format {str(fmt)[:40]!r})")
+    if type(version) is not int:
+        raise ServantError(f"{path}: model format version {str(version)[:20]!r} is not a number")
     if version > VERSION:
         raise ServantError(
             f"{path}: model format version {version} is newer than this Servant reads ({VERSION}); "
@@ -65,20 +192,129 @@ def load_model(path: str | Path) -> dict[str, Recogniser]:
         )
     if version < 1:
         raise ServantError(f"{path}: unknown model format version {version}; retrain the model")
-    recognisers: dict[str, Recogniser] = {}
-    try:
-        for role, state in header["recognisers"].items():
-            methods = methods_for(state["sense"])
-            if state["method"] not in methods:
-                raise ServantError(
-                    f"{path}: {state['sense']} method {state['method']!r} is not known to this "
-                    "Servant; upgrade Servant or retrain the model"
-                )
-            prefix = f"{role}/"
-            parts = {k[len(prefix) :]: v for k, v in files.items() if k.startswith(prefix)}
-            recognisers[role] = methods[state["method"]].from_state(state, parts)
-    except (KeyError, ValueError, TypeError) as exc:
+    roles = header.get("recognisers")
+    if not isinstance(roles, dict) or not roles:
+        raise _damaged(path, "no recogniser")
+    for role, state in roles.items():
+        if role not in ROLE_SENSE or not isinstance(state, dict):
+            raise _damaged(path, f"unknown recogniser {str(role)[:40]!r}")
+        if state.get("sense") != ROLE_SENSE[role]:
+            raise _damaged(
+                path, f"the {role} recogniser has sense {str(state.get('sense'))[:40]!r}"
+            )
+    return header
+
+
+def _recogniser(
+    path: Path, role: str, state: dict[str, Any], parts: dict[str, np.ndarray]
+) -> Recogniser:
+    methods = methods_for(state["sense"])
+    method = state.get("method")
+    if not isinstance(method, str) or method not in methods:
         raise ServantError(
-            f"{path}: damaged Servant model file ({exc!r}); retrain the model"
-        ) from exc
-    return recognisers
+            f"{path}: {state['sense']} method {str(method)[:40]!r} is not known to this "
+            "Servant; upgrade Servant or retrain the model"
+        )
+    cls = methods[method]
+    try:
+        _check_params(cls, state.get("params"))
+        _check_scenes(state)
+        _check_arrays(parts)
+        _check_centroids(state, parts, "")
+        if isinstance(state.get("novelty"), dict):
+            _check_centroids(state["novelty"], parts, "novelty_")
+    except ValueError as exc:
+        raise _damaged(path, f"{role}: {exc}") from None
+    try:
+        recogniser = cls.from_state(state, parts)
+        _try_out(recogniser)
+    except ServantError:
+        raise
+    except Exception as exc:  # an untrusted file: whatever it makes the method trip on
+        raise _damaged(path, f"{role}: {type(exc).__name__}: {first_line(exc)[:120]}") from None
+    return recogniser
+
+
+def _check_params(cls: type, params: Any) -> None:
+    """Each parameter must be one the method takes, of the type its `__init__` declares (a
+    float may be written as a whole number), and numbers within limits."""
+    if not isinstance(params, dict):
+        raise ValueError("no parameters")
+    hints = typing.get_type_hints(cls.__init__)  # type: ignore[misc]
+    for name, value in params.items():
+        if name not in hints or name == "return":
+            raise ValueError(f"unknown parameter {str(name)[:40]!r}")
+        allowed = typing.get_args(hints[name]) or (hints[name],)
+        kind = type(value)
+        if not (
+            kind in allowed
+            or (kind is int and float in allowed)
+            or value is None
+            and type(None) in allowed
+        ):
+            raise ValueError(f"parameter {name} is {str(value)[:20]!r}")
+        if kind in (int, float):
+            low, high = PARAM_LIMITS.get(name, GENERIC_LIMIT)
+            if not (math.isfinite(value) and low <= value <= high):
+                raise ValueError(f"parameter {name} is {value!r}, outside {low:g}–{high:g}")
+
+
+def _check_scenes(state: dict[str, Any]) -> None:
+    scenes = state.get("scenes")
+    if (
+        not isinstance(scenes, list)
+        or len(scenes) < 2
+        or not all(isinstance(s, str) and s and s != UNKNOWN for s in scenes)
+        or len(set(scenes)) != len(scenes)
+    ):
+        raise ValueError("its scenes are not a list of two or more distinct names")
+    owners = state.get("cluster_scene")
+    if not isinstance(owners, list) or not all(o is None or o in scenes for o in owners):
+        raise ValueError("its clusters name scenes it does not have")
+
+
+def _check_arrays(parts: dict[str, np.ndarray]) -> None:
+    for name, array in parts.items():
+        if array.dtype.kind not in "biuf" or array.ndim > 2:
+            raise ValueError(f"array {name} is not a table of numbers")
+        if array.dtype.kind == "f" and not np.all(np.isfinite(array)):
+            raise ValueError(f"array {name} holds NaN or infinity")
+
+
+def _check_centroids(state: dict[str, Any], parts: dict[str, np.ndarray], prefix: str) -> None:
+    """Centres (K, d), one spread (and count) a centre, one scene (or None) a centre."""
+    centres = parts.get(f"{prefix}centres")
+    if centres is None:
+        raise ValueError(f"no {prefix}centres")
+    if centres.ndim != 2 or len(centres) == 0 or centres.shape[1] == 0:
+        raise ValueError(f"{prefix}centres of shape {centres.shape}")
+    k = len(centres)
+    for name in ("spreads", "counts"):
+        array = parts.get(f"{prefix}{name}")
+        if array is not None and array.shape != (k,):
+            raise ValueError(f"{prefix}{name} of shape {array.shape} for {k} centres")
+    if f"{prefix}spreads" in parts and not np.all(parts[f"{prefix}spreads"] > 0):
+        raise ValueError(f"{prefix}spreads not all above zero")
+    owners = state.get("cluster_scene")
+    if not isinstance(owners, list) or len(owners) != k:
+        raise ValueError(f"{k} centres but {len(owners) if isinstance(owners, list) else 0} owners")
+
+
+def _try_out(recogniser: Recogniser) -> None:
+    """Recognise one made-up window or picture: a model whose arrays do not fit its method
+    fails here, at load time, rather than on the first live window."""
+    rng = np.random.default_rng(0)
+    if recogniser.sense == "audio":
+        rate, seconds = recogniser.rate, recogniser.window_seconds  # type: ignore[attr-defined]
+        item: Any = 0.01 * rng.standard_normal((1, int(round(rate * seconds))), dtype=np.float32)
+    else:
+        item = [rng.integers(0, 256, (48, 64, 3), dtype=np.uint8)]
+    X = recogniser.featurize(item)
+    n_scenes = len(recogniser.scenes_)
+    predicted = recogniser.predict(X)
+    confidence = np.asarray(recogniser.confidence(X), dtype=float)
+    proba = np.asarray(recogniser.predict_proba(X), dtype=float)
+    if predicted.shape != (1,) or confidence.shape != (1,) or proba.shape != (1, n_scenes):
+        raise ValueError("its arrays do not fit its method")
+    if not (np.all(np.isfinite(confidence)) and np.all(np.isfinite(proba))):
+        raise ValueError("it gives NaN or infinite confidences")

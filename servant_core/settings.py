@@ -18,6 +18,10 @@ from servant_core.storage import atomic_write_json, config_dir
 FORMAT = "servant-settings"
 VERSION = 1
 PROTOCOLS = ("maestro", "ssc32", "firmata")
+MIN_PULSE_US, MAX_PULSE_US = 400, 2600  # beyond what any hobby servo takes
+MAX_WINDOW_S = 600.0  # the paper's windows are 30 s and 20 s; ten minutes is far beyond any use
+MAX_PICTURES = 1000
+MAX_FILE_BYTES = 1 << 20  # a settings file is a few KiB; more is not one
 
 
 @dataclass(frozen=True)
@@ -38,29 +42,44 @@ class Joint:
     home_angle: float
 
     def problems(self) -> list[str]:
-        """What is wrong with this joint, if anything (empty when it is safe to drive)."""
+        """What is wrong with this joint, if anything (empty when it is safe to drive).
+
+        The first line names the fault itself, not what follows from it: with min_angle above
+        max_angle no home angle can lie between them, so only the limits are blamed.
+        """
+        if not isinstance(self.name, str) or not self.name:
+            return [f"a joint's name must be a non-empty text, not {self.name!r}"]
         lines = []
-        numbers = (self.min_angle, self.max_angle, self.min_pulse_us, self.max_pulse_us)
-        if not all(isinstance(v, int | float) and math.isfinite(v) for v in numbers):
-            return [f"joint {self.name!r}: angles and pulses must be finite numbers"]
-        if not self.name:
-            lines.append("a joint has an empty name")
-        if not isinstance(self.channel, int) or not 0 <= self.channel <= 127:
+        if not _is_integer(self.channel) or not 0 <= self.channel <= 127:
             lines.append(f"joint {self.name!r}: channel must be an integer 0..127")
+        numbers = ("min_angle", "max_angle", "min_pulse_us", "max_pulse_us")
+        not_numbers = [n for n in numbers if not _is_number(getattr(self, n))]
+        if not_numbers:
+            return [*lines, f"joint {self.name!r}: {', '.join(not_numbers)} must be finite numbers"]
         if not self.min_angle < self.max_angle:
             lines.append(f"joint {self.name!r}: min_angle must be below max_angle")
-        if not 400 <= self.min_pulse_us < self.max_pulse_us <= 2600:
+        if not MIN_PULSE_US <= self.min_pulse_us < self.max_pulse_us <= MAX_PULSE_US:
             lines.append(
                 f"joint {self.name!r}: pulses must satisfy "
-                "400 <= min_pulse_us < max_pulse_us <= 2600"
+                f"{MIN_PULSE_US} <= min_pulse_us < max_pulse_us <= {MAX_PULSE_US}"
             )
-        speed = self.max_speed_deg_s
-        if not (isinstance(speed, int | float) and math.isfinite(speed) and speed > 0):
+        if not (_is_number(self.max_speed_deg_s) and self.max_speed_deg_s > 0):
             lines.append(f"joint {self.name!r}: max_speed_deg_s must be a positive number")
         home = self.home_angle
-        if not (isinstance(home, int | float) and self.min_angle <= home <= self.max_angle):
+        if self.min_angle < self.max_angle and not (
+            _is_number(home) and self.min_angle <= home <= self.max_angle
+        ):
             lines.append(f"joint {self.name!r}: home_angle must lie within min_angle..max_angle")
         return lines
+
+
+def _is_number(value: object) -> bool:
+    """A finite int or float; True and False are not numbers here (JSON's `true` is no angle)."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _is_integer(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 def default_joints() -> list[Joint]:
@@ -98,27 +117,38 @@ class Settings:
         raise ServantError(f"no joint named {name!r}; the arm's joints are: {names}")
 
     def problems(self) -> list[str]:
+        """What is wrong with these settings, the most basic first (empty when they are sound)."""
+        if not isinstance(self.joints, list) or not self.joints:
+            return ["the arm needs at least one joint in `joints`"]
+        if not all(isinstance(j, Joint) for j in self.joints):
+            return ["every joint must be an object with the joint's fields"]
         lines = [line for joint in self.joints for line in joint.problems()]
-        if self.protocol not in PROTOCOLS:
+        if not lines:  # names and channels are known to be texts and integers now
+            names = [j.name for j in self.joints]
+            if len(set(names)) != len(names):
+                lines.append("two joints share a name")
+            channels = [j.channel for j in self.joints]
+            if len(set(channels)) != len(channels):
+                lines.append("two joints share a channel")
+        if not isinstance(self.protocol, str) or self.protocol not in PROTOCOLS:
             lines.append(
                 f"protocol {self.protocol!r} is unknown; use one of {', '.join(PROTOCOLS)}"
             )
-        names = [j.name for j in self.joints]
-        if len(set(names)) != len(names):
-            lines.append("two joints share a name")
-        channels = [j.channel for j in self.joints]
-        if len(set(channels)) != len(channels):
-            lines.append("two joints share a channel")
+        for name in ("audio_device", "camera"):
+            value = getattr(self, name)
+            if not (value is None or isinstance(value, str) or _is_integer(value)):
+                lines.append(f"{name} must be a name, an index or null, not {value!r}")
+        if not (self.serial_port is None or isinstance(self.serial_port, str)):
+            lines.append(f"serial_port must be a port name or null, not {self.serial_port!r}")
         for name in ("acoustic_window_s", "confirm_window_s", "picture_interval_s"):
             value = getattr(self, name)
-            if not (isinstance(value, int | float) and value > 0):
-                lines.append(f"{name} must be a positive number of seconds")
-        if not (isinstance(self.pictures_needed, int) and self.pictures_needed >= 1):
-            lines.append("pictures_needed must be a positive integer")
-        if not (
-            isinstance(self.confidence_threshold, int | float)
-            and 0 <= self.confidence_threshold <= 100
-        ):
+            if not (_is_number(value) and 0 < value <= MAX_WINDOW_S):
+                lines.append(
+                    f"{name} must be a number of seconds above 0, at most {MAX_WINDOW_S:g}"
+                )
+        if not (_is_integer(self.pictures_needed) and 1 <= self.pictures_needed <= MAX_PICTURES):
+            lines.append(f"pictures_needed must be an integer 1..{MAX_PICTURES}")
+        if not (_is_number(self.confidence_threshold) and 0 <= self.confidence_threshold <= 100):
             lines.append("confidence_threshold must be a percentage, 0..100")
         return lines
 
@@ -137,32 +167,58 @@ def load_settings(path: str | Path | None = None) -> Settings:
         return Settings()
     fix = "fix or delete it to get the defaults"
     try:
+        if path.stat().st_size > MAX_FILE_BYTES:
+            raise ServantError(f"{path}: too big for a settings file; {fix}")
         data = json.loads(path.read_text(encoding="utf-8"))
+    except RecursionError as exc:
+        raise ServantError(
+            f"{path}: not a readable settings file (nested too deeply); {fix}"
+        ) from exc
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ServantError(f"{path}: not a readable settings file ({exc}); {fix}") from exc
     if not isinstance(data, dict) or data.get("format", FORMAT) != FORMAT:
         raise ServantError(f"{path}: not a Servant settings file; {fix}")
     version = data.pop("version", VERSION)
     data.pop("format", None)
-    if not isinstance(version, int) or version > VERSION:
+    if not _is_integer(version) or version < 1:
+        raise ServantError(f"{path}: settings version {version!r} is not an integer version; {fix}")
+    if version > VERSION:
         raise ServantError(
-            f"{path}: settings version {version!r} is newer than this Servant reads; "
-            "upgrade Servant"
+            f"{path}: settings version {version} is newer than this Servant reads; upgrade Servant"
         )
     known = {f.name for f in fields(Settings)}
     unknown = sorted(set(data) - known)
     if unknown:
-        raise ServantError(f"{path}: unknown setting(s) {', '.join(unknown)}; {fix}")
+        raise ServantError(f"{path}: unknown setting(s) {', '.join(map(repr, unknown))}; {fix}")
     try:
         if "joints" in data:
-            data["joints"] = [Joint(**joint) for joint in data["joints"]]
-        settings = Settings(**data)
-    except TypeError as exc:
-        raise ServantError(f"{path}: a joint is malformed ({exc}); {fix}") from exc
+            data["joints"] = _joints(data["joints"])
+    except ValueError as exc:
+        raise ServantError(f"{path}: {exc}; {fix}") from exc
+    settings = Settings(**data)
     problems = settings.problems()
     if problems:
         raise ServantError(f"{path}: {problems[0]}; {fix}")
     return settings
+
+
+def _joints(raw: Any) -> list[Joint]:
+    """The joints of a settings file; ValueError naming the first that is not one."""
+    if not isinstance(raw, list):
+        raise ValueError("joints must be a list of joints")
+    names = [f.name for f in fields(Joint)]
+    joints = []
+    for i, joint in enumerate(raw, start=1):
+        if not isinstance(joint, dict):
+            raise ValueError(f"joint {i} is not an object with the joint's fields")
+        missing = [n for n in names if n not in joint]
+        unknown = sorted(set(joint) - set(names))
+        if missing or unknown:
+            what = [f"no {', '.join(missing)}"] if missing else []
+            what += [f"unknown field(s) {', '.join(map(repr, unknown))}"] if unknown else []
+            raise ValueError(f"joint {i} is malformed ({'; '.join(what)})")
+        joints.append(Joint(**joint))
+    return joints
 
 
 def save_settings(settings: Settings, path: str | Path | None = None) -> Path:

@@ -70,6 +70,30 @@ def test_a_bad_record_is_named(tmp_path):
         load_records(path)
 
 
+@pytest.mark.parametrize(
+    ("records", "message"),
+    [
+        # Issue 13, 8: a deeply nested file ended in a RecursionError.
+        ("[" * 100_000 + "]" * 100_000, r"not a readable teach record file \(nested too deeply\)"),
+        ([{"scene": "a", "scores": {"acoustic": {"a": 1}}, "pose": {"x": 1}, "t": True}], "t is"),
+        (
+            [{"scene": "a", "scores": {"visual": {"a": 1}}, "pose": {"x": 1}, "notes": [[]]}],
+            "notes",
+        ),
+    ],
+)
+def test_malformed_records_are_one_clear_line_and_kept(tmp_path, records, message):
+    path = tmp_path / "records.json"
+    if isinstance(records, str):
+        text = f'{{"format": "servant-teach-records", "version": 2, "records": {records}}}'
+    else:
+        text = json.dumps({"format": "servant-teach-records", "version": 2, "records": records})
+    path.write_text(text)
+    with pytest.raises(ServantError, match=message):
+        append_record(record("coffee", {"shoulder": 1.0}), path)
+    assert path.read_text() == text
+
+
 def test_records_from_an_older_version_are_migrated_and_backed_up(tmp_path):
     path = tmp_path / "records.json"
     v1 = {
@@ -83,7 +107,7 @@ def test_records_from_an_older_version_are_migrated_and_backed_up(tmp_path):
         ("coffee", {"elbow": 42.0}),
         ("gym", {"elbow": 10.0}),
     ]
-    assert records[0].scores["visual"] == {"coffee": 1.0, "gym": 0.0}
+    assert records[0].scores["visual"] == {"coffee": 1.0}
     append_record(record("street", {"elbow": 70.0}), path, legacy_joint="elbow")
     assert json.loads((tmp_path / "records.json.v1.bak").read_text()) == v1
     assert [r.scene for r in load_records(path)] == ["coffee", "gym", "street"]

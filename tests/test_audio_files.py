@@ -76,3 +76,78 @@ def test_write_wav_is_atomic_and_round_trips(tmp_path):
     write_wav(path, tone(440, 0.5, 8000), 8000)
     assert [p.name for p in path.parent.iterdir()] == ["x.wav"]
     assert abs(peak_hz(read_audio(path, 8000), 8000) - 440) < 3
+
+
+# Issue 13 item 4 and 9: the header is checked before decoding; odd names and NaN samples.
+
+
+def wav_with_rate_field(tmp_path, rate_field: int):
+    """A 2 s, 8 kHz WAV whose header then claims `rate_field` Hz."""
+    path = tmp_path / "claims.wav"
+    write_wav(path, tone(440, 2.0, 8000), 8000)
+    data = bytearray(path.read_bytes())
+    assert data[24:28] == (8000).to_bytes(4, "little")  # the RIFF fmt chunk's sample rate
+    data[24:28] = rate_field.to_bytes(4, "little")
+    path.write_bytes(bytes(data))
+    return path
+
+
+@pytest.mark.parametrize("rate_field", [1, 7999, 192001, 2**31 - 1])
+def test_a_header_claiming_an_odd_rate_is_refused_before_decoding(tmp_path, rate_field):
+    path = wav_with_rate_field(tmp_path, rate_field)
+    with pytest.raises(ServantError, match="sample rate") as info:
+        read_audio(path)  # before: 1 Hz asked for 5.6 GB (resampling 16,000 samples to 44.1 kHz)
+    assert "\n" not in str(info.value)
+
+
+def test_too_many_channels_or_too_long_is_refused(tmp_path):
+    path = tmp_path / "many.wav"
+    sf.write(path, np.zeros((10, 17), np.float32), 8000)
+    with pytest.raises(ServantError, match="channels"):
+        read_audio(path)
+    from servant_core import audio
+
+    long = tmp_path / "long.flac"
+    sf.write(long, np.zeros(8000 * 3, np.float32), 8000)
+    original = audio.MAX_RECORDING_SECONDS
+    audio.MAX_RECORDING_SECONDS = 2.0  # instead of writing a 10-minute file
+    try:
+        with pytest.raises(ServantError, match="longer than"):
+            read_audio(long)
+    finally:
+        audio.MAX_RECORDING_SECONDS = original
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_nan_or_infinite_samples_are_refused(tmp_path, bad):
+    signal = tone(440, 1.0, 8000)
+    signal[100] = bad
+    path = tmp_path / "nan.wav"
+    sf.write(path, signal, 8000, subtype="FLOAT")
+    with pytest.raises(ServantError, match="not numbers"):
+        read_audio(path, 8000)
+
+
+def test_a_missing_file_says_no_such_file(tmp_path):
+    with pytest.raises(ServantError, match="no such file") as info:
+        read_audio(tmp_path / "absent.wav")
+    assert "System error" not in str(info.value)
+
+
+@pytest.mark.timeout(20)
+def test_a_fifo_is_refused_without_waiting_for_a_writer(tmp_path):
+    import os
+
+    fifo = tmp_path / "pipe.wav"
+    os.mkfifo(fifo)
+    with pytest.raises(ServantError, match="not a regular file"):
+        read_audio(fifo)  # before: open() blocked until someone wrote into the pipe
+
+
+def test_a_file_name_that_is_not_utf8_is_read(tmp_path):
+    import os
+
+    name = os.fsdecode(b"caf\xe9.wav")
+    path = tmp_path / name
+    write_wav(path, tone(440, 0.5, 8000), 8000)
+    assert len(read_audio(path, 8000)) == 4000

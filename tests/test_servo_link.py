@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import re
+import subprocess
+import sys
+
 import pytest
 
 from servant_core.errors import ServantError
@@ -179,3 +183,61 @@ def test_joints_a_protocol_cannot_drive_are_refused_before_opening():
     low = [Joint("wrist", 3, 0, 90, 500, 1500, 30, 0)]
     with pytest.raises(ServantError, match="StandardFirmata reads pulses below 544"):
         ServoLink.open(None, "firmata", low, dry_run=True)
+
+
+def _emulator_process(protocol: str) -> tuple[subprocess.Popen, str]:
+    """`servant emulate-servo` in its own process, and its port: killing it unplugs for real."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "servant_tui", "emulate-servo", "--protocol", protocol],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert proc.stdout is not None
+    port = re.search(r" on (\S+);", proc.stdout.readline())
+    assert port is not None
+    return proc, port.group(1)
+
+
+@pytest.mark.parametrize("protocol", ["maestro", "ssc32", "firmata"])
+def test_an_idle_controller_killed_disarms_the_link_with_one_clear_error(protocol):
+    # Issue 13, 1: pyserial's reset_input_buffer raises termios.error (not an OSError) on a
+    # pty whose other side is gone; it escaped raw and the link stayed armed.
+    proc, port = _emulator_process(protocol)
+    try:
+        link = ServoLink.open(port, protocol, JOINTS, timeout=1.0)
+        link.arm()
+    finally:
+        proc.kill()
+        proc.wait()
+    try:
+        for call in (link.read_positions, link.arm, lambda: link.record(0.2)):
+            with pytest.raises(ServantError, match="lost|not connected"):
+                call()
+            state = link.status()
+            assert not state.armed and not state.connected
+        with pytest.raises(ServantError, match="not armed"):
+            link.move_to({"shoulder": 10})
+    finally:
+        link.close()
+
+
+def test_an_emulator_stopped_while_idle_disarms_the_link():
+    emu, port = start_emulator("maestro")
+    link = ServoLink.open(port, "maestro", JOINTS)
+    link.arm()
+    emu.stop()
+    with pytest.raises(ServantError, match=r"was lost \(.*\); the arm is disarmed"):
+        link.read_positions()
+    assert not link.armed and not link.connected
+    link.close()
+
+
+def test_a_file_that_is_not_a_serial_port_is_said(tmp_path):
+    for port in ("/dev/null", str(tmp_path)):
+        with pytest.raises(ServantError, match="not a serial port"):
+            ServoLink.open(port, "maestro", JOINTS)
+
+
+def test_an_emulator_link_that_cannot_be_made_is_one_clear_error(tmp_path):
+    with pytest.raises(ServantError, match="cannot make it a link to the emulator's port"):
+        start_emulator("maestro", link=tmp_path / "no-such-folder" / "servo0")

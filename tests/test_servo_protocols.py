@@ -97,6 +97,15 @@ def test_firmata_replies_skip_unsolicited_reports():
         f.parse_probe(bytes([0x13, 0x37]))
 
 
+def test_firmata_pin_state_with_oversized_data_is_refused():
+    # Issue 13, 2: 200 data bytes made a 1400-bit integer, and float() of it an OverflowError.
+    reply = bytes([0xF0, 0x6E, 9, 4]) + bytes([0x7F] * 200) + bytes([0xF7])
+    with pytest.raises(ProtocolError, match="a pin state of 200 bytes"):
+        firmata.Firmata().parse_positions(reply, [9])
+    largest = firmata.pin_state_response(9, 4, (1 << 16) - 1)
+    assert firmata.Firmata().parse_positions(largest, [9]) == ([65535.0], len(largest))
+
+
 def test_protocols_refuse_joints_they_cannot_drive():
     low = Joint("wrist", 3, 0, 90, 500, 1500, 30, 0)
     assert firmata.Firmata().check_joints([low])  # StandardFirmata would read 500 as degrees

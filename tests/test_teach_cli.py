@@ -144,3 +144,122 @@ def test_emulate_servo_prints_the_port_to_connect_to():
     )
     assert proc.returncode == 0, proc.stderr
     assert re.match(r"Emulating a Lynxmotion SSC-32 on /dev/pts/\d+; connect with", proc.stdout)
+
+
+def test_teach_survives_the_controller_killed_while_idle(tmp_path):
+    # Issue 13, 1: the emulator killed between two answers; `record` then read the lost port.
+    emulator = subprocess.Popen(
+        [sys.executable, "-m", "servant_tui", "emulate-servo", "--protocol", "maestro"],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert emulator.stdout is not None
+    found = re.search(r" on (\S+);", emulator.stdout.readline())
+    assert found is not None
+    records = tmp_path / "records.json"
+    argv = ["--port", found.group(1), "--records", str(records), "--iterations", "20"]
+    argv += ["--learner", str(tmp_path / "learner.npz")]
+    teach = subprocess.Popen(
+        [sys.executable, "-m", "servant_tui", "teach", *argv],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert teach.stdout is not None and teach.stdin is not None
+        assert "The arm is armed on" in teach.stdout.readline()
+    finally:
+        emulator.kill()
+        emulator.wait()
+    out, err = teach.communicate("coffee\nrecord 0.2\n20\n\ncoffee\n", timeout=60)
+    assert "Traceback" not in err, err
+    assert teach.returncode == 0, err
+    lost = [line for line in out.splitlines() if "the arm is disarmed" in line]
+    assert len(lost) == 1 and "was lost" in lost[0], out
+    assert [(r.scene, r.pose) for r in load_records(records)] == [("coffee", {"shoulder": 20.0})]
+
+
+def test_teach_records_do_not_grow_with_the_labels_taught_before(monkeypatch, capsys):
+    # Issue 13, 8: each typed record listed every scene taught before it (a zero score each), so
+    # the file grew quadratically with the labels of a session (300 labels: 116 s).
+    labels = [f"scene{i}" for i in range(40)]
+    session = "".join(f"{label}\n{i}\n" for i, label in enumerate(labels)) + "\n"
+    status, _, _ = run(["teach", "--iterations", "1"], session, monkeypatch, capsys)
+    assert status == 0
+    records = load_records()
+    assert [r.scene for r in records] == labels
+    assert all(set(r.scores["acoustic"]) == {r.scene} for r in records)
+
+
+def test_servo_query_refuses_an_oversized_firmata_reply_in_one_line(monkeypatch, capsys):
+    # Issue 13, 2: a pin state reply of 200 data bytes ended `servo query` in an OverflowError.
+    emulator, port = start_emulator("firmata")
+    try:
+        emulator.pin_states[default_joints()[0].channel] = (1 << 1400) - 1  # 200 7-bit bytes
+        argv = ["servo", "query", "--port", port, "--protocol", "firmata"]
+        status, _, err = run(argv, "", monkeypatch, capsys)
+    finally:
+        emulator.stop()
+    assert status == 2
+    assert err.count("\n") == 1 and "not a Arduino (StandardFirmata) reply" in err
+    assert "a pin state of 200 bytes" in err
+
+
+def test_teach_with_an_arm_of_no_joints_is_one_line(tmp_path, monkeypatch, capsys):
+    # Issue 13, 8: `"joints": []` ended `servant teach` in an IndexError.
+    settings = tmp_path / "settings.json"
+    settings.write_text('{"joints": []}')
+    status, _, err = run(
+        ["teach", "--settings", str(settings)], "coffee\n1\n\n", monkeypatch, capsys
+    )
+    assert status == 2 and err.count("\n") == 1
+    assert "the arm needs at least one joint" in err
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("timeout", ["nan", "inf", "0", "-1", "1e9"])
+def test_servo_query_refuses_a_timeout_that_would_hang(timeout, capsys):
+    # Issue 13, 7: `--timeout nan` made a deadline that never comes; a silent controller hung.
+    emulator, port = start_emulator("maestro", fault="silent")
+    try:
+        with pytest.raises(SystemExit) as info:
+            main(["servo", "query", "--port", port, "--timeout", timeout])
+    finally:
+        emulator.stop()
+    assert info.value.code == 2
+    assert "argument --timeout" in capsys.readouterr().err
+
+
+def test_teach_dry_run_refuses_recordings_that_never_end(tmp_path):
+    # Issue 13, 7: `record nan` looped for ever, growing memory; `record 1e9` died in
+    # MemoryError. Run in a child process with bounded memory and time, so a regression fails
+    # instead of taking the machine down.
+    script = "coffee\nrecord nan\nrecord 1e9\nrecord inf\nrecord 0.3\n\n"
+    limit = "import resource; resource.setrlimit(resource.RLIMIT_AS, (2 << 30, 2 << 30)); "
+    code = limit + "from servant_tui.main import main; raise SystemExit(main())"
+    argv = ["teach", "--dry-run", "--iterations", "5", "--records", str(tmp_path / "r.json")]
+    argv += ["--learner", str(tmp_path / "l.npz")]
+    proc = subprocess.run(
+        [sys.executable, "-c", code, *argv],
+        input=script,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.count("a recording must be 0 to 600 seconds") == 3
+    assert "Recording for 0.3 s" in proc.stdout
+    assert [r.source for r in load_records(tmp_path / "r.json")] == ["recorded"]
+
+
+@pytest.mark.parametrize(
+    ("option", "what"), [("--records", "teach records"), ("--learner", "action learner")]
+)
+def test_teach_files_that_cannot_be_saved_are_one_line(option, what, monkeypatch, capsys):
+    # Issue 13, 6 (on the arm's side): nowhere to write ended in a traceback. /proc takes no new
+    # files, even for root (a read-only folder would not stop root).
+    argv = ["teach", "--iterations", "2", option, "/proc/servant-nowhere/file"]
+    status, _, err = run(argv, "coffee\n1\n\n", monkeypatch, capsys)
+    assert status == 2 and err.count("\n") == 1
+    assert f"cannot save the {what} (No such file or directory)" in err

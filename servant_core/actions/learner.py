@@ -25,8 +25,10 @@ from typing import Any, Self
 import numpy as np
 from sklearn.exceptions import ConvergenceWarning, NotFittedError
 from sklearn.neural_network import MLPRegressor
+from threadpoolctl import threadpool_limits
 
 from servant_core.actions.records import SENSES, TeachRecord, label_scores
+from servant_core.audio import os_reason
 from servant_core.errors import ServantError
 from servant_core.recognisers.base import UNKNOWN
 from servant_core.storage import atomic_save_npz, data_dir
@@ -157,7 +159,9 @@ class ActionLearner:
             checkpoints.append(self.max_iter)
         for checkpoint in checkpoints:
             net.set_params(max_iter=checkpoint - done)
-            with warnings.catch_warnings():
+            # One BLAS thread: these matrices are tiny, and threads fighting over a busy CPU made
+            # a 300-scene fit 20 times slower (bench/teach_records.py).
+            with warnings.catch_warnings(), threadpool_limits(1, user_api="blas"):
                 warnings.simplefilter("ignore", ConvergenceWarning)  # stopping early is the plan
                 net.fit(x, target)
             done = checkpoint
@@ -254,7 +258,13 @@ class ActionLearner:
             "y_scale": self.y_scale_,
             "header": np.array(json.dumps(header)),
         }
-        return atomic_save_npz(path, arrays)
+        try:
+            return atomic_save_npz(path, arrays)
+        except OSError as exc:
+            raise ServantError(
+                f"{path}: cannot save the action learner ({os_reason(exc)}); the previous file "
+                "is unchanged; check that its folder can be written to and has space"
+            ) from None
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> ActionLearner:
@@ -268,7 +278,15 @@ class ActionLearner:
                 arrays = {name: npz[name] for name in npz.files}
             header = json.loads(str(arrays.pop("header")))
             fmt, version = header["format"], header["version"]
-        except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile, EOFError) as exc:
+        except (
+            OSError,
+            ValueError,
+            KeyError,
+            TypeError,
+            RecursionError,
+            zipfile.BadZipFile,
+            EOFError,
+        ) as exc:
             raise ServantError(
                 f"{path}: not a Servant action learner (corrupt or another format)"
             ) from exc

@@ -5,7 +5,7 @@ new record. A file from an older version is read and migrated (its original is k
 `.v<N>.bak` before the first rewrite); a broken or newer file is refused and never overwritten.
 
 Version 1 is the paper's shape: a scene label and one servo angle (`{"scene", "action", "t"}`).
-It becomes a pose for one joint (`legacy_joint`) and one-hot scores over the file's scenes.
+It becomes a pose for one joint (`legacy_joint`) and certain scores for its scene.
 """
 
 from __future__ import annotations
@@ -13,17 +13,19 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from servant_core.audio import os_reason
 from servant_core.errors import ServantError
-from servant_core.storage import atomic_write_bytes, atomic_write_json, data_dir
+from servant_core.storage import atomic_write_bytes, atomic_write_text, data_dir
 
 FORMAT = "servant-teach-records"
 VERSION = 2
 SENSES = ("acoustic", "visual")
 SOURCES = ("typed", "recorded", "perceived")
+MAX_FILE_BYTES = 64 << 20  # some 300,000 records: far more than anyone teaches
 
 
 @dataclass(frozen=True)
@@ -36,12 +38,17 @@ class TeachRecord:
     notes: list[str] = field(default_factory=list)
 
 
-def one_hot(scene: str, scenes: Iterable[str]) -> dict[str, float]:
+def one_hot(scene: str, scenes: Iterable[str] = ()) -> dict[str, float]:
     return {s: float(s == scene) for s in sorted({*scenes, scene})}
 
 
-def label_scores(scene: str, scenes: Iterable[str]) -> dict[str, dict[str, float]]:
-    """Scores for a scene the user typed (not perceived): certain, for both senses."""
+def label_scores(scene: str, scenes: Iterable[str] = ()) -> dict[str, dict[str, float]]:
+    """Scores for a scene the user typed (not perceived): certain, for both senses.
+
+    `scenes` only adds explicit zeros: a scene without a score counts as 0 (see
+    `ActionLearner.features`). Records stored one after another leave it out, so that each one
+    does not grow with the number of scenes taught before it (quadratic growth, issue 13).
+    """
     scores = one_hot(scene, scenes)
     return {sense: dict(scores) for sense in SENSES}
 
@@ -78,29 +85,26 @@ def _record(raw: Any) -> TeachRecord:
     if source not in SOURCES:
         raise ValueError(f"source {source!r} is unknown")
     t = raw.get("t", 0.0)
-    if not isinstance(t, int | float):
+    if isinstance(t, bool) or not isinstance(t, int | float) or not math.isfinite(t):
         raise ValueError("t is not a time")
     notes = raw.get("notes", [])
+    if not isinstance(notes, list) or not all(isinstance(n, str) for n in notes):
+        raise ValueError("notes must be a list of texts")
     return TeachRecord(
         scene=scene,
         scores={s: _finite_map(v, f"scores[{s!r}]") for s, v in scores.items()},
         pose=_finite_map(raw.get("pose"), "pose"),
         t=float(t),
         source=source,
-        notes=[str(n) for n in notes] if isinstance(notes, list) else [],
+        notes=list(notes),
     )
 
 
 def _migrate_v1(raw_records: Sequence[Any], legacy_joint: str) -> list[dict[str, Any]]:
-    scenes: set[str] = {
-        r["scene"]
-        for r in raw_records
-        if isinstance(r, Mapping) and isinstance(r.get("scene"), str)
-    }
     return [
         {
             "scene": r.get("scene"),
-            "scores": label_scores(r["scene"], scenes) if isinstance(r.get("scene"), str) else None,
+            "scores": label_scores(r["scene"]) if isinstance(r.get("scene"), str) else None,
             "pose": {legacy_joint: r.get("action")},
             "t": r.get("t", 0.0),
         }
@@ -113,7 +117,13 @@ def _migrate_v1(raw_records: Sequence[Any], legacy_joint: str) -> list[dict[str,
 def _read(path: Path, legacy_joint: str) -> tuple[int, list[TeachRecord]]:
     fix = "fix or move the file away (Servant never overwrites it)"
     try:
+        if path.stat().st_size > MAX_FILE_BYTES:
+            raise ServantError(f"{path}: too big for a teach record file; {fix}")
         data = json.loads(path.read_text(encoding="utf-8"))
+    except RecursionError as exc:
+        raise ServantError(
+            f"{path}: not a readable teach record file (nested too deeply); {fix}"
+        ) from exc
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ServantError(f"{path}: not a readable teach record file ({exc}); {fix}") from exc
     if not isinstance(data, Mapping) or data.get("format") != FORMAT:
@@ -149,10 +159,27 @@ def load_records(
     return _read(path, legacy_joint)[1]
 
 
+def _fields(record: TeachRecord) -> dict[str, Any]:
+    """The record as JSON would have it (a shallow view: `asdict` deep-copies, far slower)."""
+    return {f.name: getattr(record, f.name) for f in fields(TeachRecord)}
+
+
+def encode_records(records: Sequence[TeachRecord]) -> str:
+    """The file's text: one record a line, so that it stays readable and diffable."""
+    head = json.dumps({"format": FORMAT, "version": VERSION})[:-1]
+    lines = ",\n".join(json.dumps(_fields(r), sort_keys=True) for r in records)
+    return f'{head}, "records": [\n{lines}\n]}}\n' if records else f'{head}, "records": []}}\n'
+
+
 def save_records(records: Sequence[TeachRecord], path: str | Path | None = None) -> Path:
     path = Path(path) if path is not None else default_records_path()
-    payload = {"format": FORMAT, "version": VERSION, "records": [asdict(r) for r in records]}
-    return atomic_write_json(path, payload)
+    try:
+        return atomic_write_text(path, encode_records(records))
+    except OSError as exc:
+        raise ServantError(
+            f"{path}: cannot save the teach records ({os_reason(exc)}); the file is unchanged; "
+            "check that its folder can be written to and has space"
+        ) from None
 
 
 def append_record(
@@ -160,12 +187,18 @@ def append_record(
 ) -> list[TeachRecord]:
     """Add `record` to the file, atomically; returns every record now in it."""
     path = Path(path) if path is not None else default_records_path()
-    _record(asdict(record))  # the same checks a reader applies: never write what cannot be read
+    _record(_fields(record))  # the same checks a reader applies: never write what cannot be read
     version, records = _read(path, legacy_joint) if path.exists() else (VERSION, [])
     if version < VERSION:
         backup = path.with_name(f"{path.name}.v{version}.bak")
         if not backup.exists():
-            atomic_write_bytes(backup, path.read_bytes())
+            try:
+                atomic_write_bytes(backup, path.read_bytes())
+            except OSError as exc:
+                raise ServantError(
+                    f"{backup}: cannot keep the old teach records ({os_reason(exc)}); nothing "
+                    "was changed; check that the folder can be written to and has space"
+                ) from None
     records.append(record)
     save_records(records, path)
     return records

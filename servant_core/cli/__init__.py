@@ -9,10 +9,13 @@ The TUI entry point (`servant_tui.main`) builds on this parser; this package nev
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
+import os
 import sys
-from collections.abc import Sequence
+import warnings
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 from servant_core.errors import ServantError
@@ -24,8 +27,48 @@ SUBCOMMAND_MODULES = (
 )
 
 
+# Options people reach for on the wrong subcommand, and where they are.
+OPTION_HINTS = {
+    "--method": "train, eval fusion and table take --audio-method and --image-method",
+    "--audio-method": "eval audio and eval image take --method",
+    "--image-method": "eval audio and eval image take --method",
+}
+
+
+class DefaultsFormatter(argparse.HelpFormatter):
+    """Shows an option's default after its help, unless there is none to show (None, a flag's
+    False) or the help already says it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        shown = action.default not in (None, False, argparse.SUPPRESS, [])
+        if shown and "default" not in text and action.option_strings:
+            text += " (default: %(default)s)"
+        return text
+
+
+class ServantParser(argparse.ArgumentParser):
+    """Every (sub)command's `--help` shows the defaults; a misplaced option gets a hint."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", DefaultsFormatter)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> Any:
+        """One line, as for every other error (argparse would print the usage first)."""
+        hints: list[str] = []
+        if message.startswith("unrecognized arguments"):
+            words = [w.split("=")[0] for w in message.split(":", 1)[-1].split()]
+            hints = [OPTION_HINTS[w] for w in words if w in OPTION_HINTS]
+        hints.append(f"see `{self.prog} --help`")
+        command = self.prog.removeprefix("servant").strip()
+        where = f"{command}: " if command else ""
+        text = "; ".join([message, *dict.fromkeys(hints)])
+        self.exit(2, f"servant: error: {where}{one_line(text)}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ServantParser(
         prog="servant",
         description="Scene recognition from sound and colour, driving a wearable arm. "
         "With no subcommand, opens the terminal application on the live devices.",
@@ -41,7 +84,19 @@ def emit(args: argparse.Namespace, payload: Any, text: str) -> None:
     if getattr(args, "json", False):
         print(json.dumps(payload, indent=2, default=_json_default))
     else:
-        print(text)
+        print(printable(text, sys.stdout))
+
+
+def one_line(text: str) -> str:
+    """`text` with control characters (a file name may hold a newline) shown as escapes."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
+def printable(text: str, stream: Any) -> str:
+    """`text` as `stream` can encode it: a file name that is not UTF-8 keeps its odd bytes
+    as `\\udcXX` escapes instead of failing the print."""
+    encoding = getattr(stream, "encoding", None) or "utf-8"
+    return text.encode(encoding, "backslashreplace").decode(encoding)
 
 
 def _json_default(value: Any) -> Any:
@@ -56,13 +111,59 @@ def _json_default(value: Any) -> Any:
 
 def run_handler(args: argparse.Namespace) -> int:
     """Run a parsed subcommand; a ServantError becomes one line on stderr and exit status 2."""
+    with library_noise_silenced():
+        try:
+            return int(args.handler(args) or 0)
+        except ServantError as error:
+            print(f"servant: error: {one_line(str(error))}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            return 130
+
+
+@contextlib.contextmanager
+def library_noise_silenced() -> Iterator[None]:
+    """Keep what the libraries print out of Servant's own lines on stderr.
+
+    libpng, libjpeg, mpg123 and OpenCV write their warnings straight to file descriptor 2 (not
+    through Python), and scikit-learn and numpy raise Python warnings; each problem they see
+    is reported by Servant in its own words. Descriptor 2 goes to /dev/null meanwhile, and
+    `sys.stderr`, when it writes to descriptor 2, is moved to a copy of the real one.
+    Only for headless commands: the TUI draws on that descriptor.
+    """
     try:
-        return int(args.handler(args) or 0)
-    except ServantError as error:
-        print(f"servant: error: {error}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return 130
+        sys.stderr.flush()
+        real = os.dup(2)
+    except (OSError, ValueError, AttributeError):  # no descriptor 2 at all: nothing to keep out
+        yield
+        return
+    python_stderr = sys.stderr
+    try:
+        moved = python_stderr.fileno() == 2
+    except (OSError, ValueError, AttributeError):  # e.g. an in-memory stream under a test
+        moved = False
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    if moved:
+        sys.stderr = open(  # noqa: SIM115  # closed in the finally below
+            real,
+            "w",
+            encoding=python_stderr.encoding,
+            errors="backslashreplace",
+            buffering=1,
+            closefd=False,
+        )
+    os.dup2(devnull, 2)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            yield
+    finally:
+        if moved:
+            sys.stderr.close()
+            sys.stderr = python_stderr
+        os.dup2(real, 2)
+        os.close(real)
+        os.close(devnull)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

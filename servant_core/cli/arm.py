@@ -22,14 +22,17 @@ from servant_core.actions.records import (
     load_records,
 )
 from servant_core.cli import emit
+from servant_core.cli.options import bounded_int, finite_float
 from servant_core.errors import ServantError
 from servant_core.servo import PROTOCOLS
 from servant_core.servo.calibration import clamp_pose
 from servant_core.servo.emulator import start_emulator
-from servant_core.servo.link import ManualClock, ServoLink
+from servant_core.servo.link import MAX_RECORD_S, MAX_TIMEOUT_S, ManualClock, ServoLink, seconds
 from servant_core.settings import Joint, Settings, load_settings
 
 RECORD_SECONDS = 3.0
+MAX_ITERATIONS = 100_000  # the paper's session trains 3000; a hundred thousand is minutes already
+MAX_EMULATE_S = 7 * 24 * 3600.0
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -49,7 +52,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     teach.add_argument("--learner", help="learner file (default: the data dir's teach/learner.npz)")
     teach.add_argument("--joint", help="the joint a bare number moves (default: the first joint)")
     teach.add_argument(
-        "--iterations", type=int, default=3000, help="training iterations (default 3000)"
+        "--iterations",
+        type=bounded_int(1, MAX_ITERATIONS),
+        default=3000,
+        help="training iterations",
     )
     teach.add_argument(
         "--predict-only",
@@ -81,7 +87,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     emulate.add_argument("--protocol", choices=sorted(PROTOCOLS), default="maestro")
     emulate.add_argument("--link", help="also make this path a symlink to the port (a stable name)")
     emulate.add_argument(
-        "--seconds", type=float, help="stop after this many seconds (default: Ctrl-C)"
+        "--seconds",
+        type=finite_float(0.0, MAX_EMULATE_S),
+        help="stop after this many seconds (default: Ctrl-C)",
     )
     emulate.set_defaults(handler=run_emulate)
 
@@ -99,7 +107,12 @@ def _link_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--dry-run", action="store_true", help="send nothing: print the bytes instead"
     )
-    parser.add_argument("--timeout", type=float, default=0.5, help="seconds to wait for an answer")
+    parser.add_argument(
+        "--timeout",
+        type=finite_float(0.01, MAX_TIMEOUT_S),
+        default=0.5,
+        help="seconds to wait for an answer",
+    )
     parser.add_argument("--json", action="store_true", help="print JSON")
 
 
@@ -306,8 +319,7 @@ def _train(
             session.say(f"No action for {label}; nothing recorded.")
             continue
         pose, source, notes = answer
-        scenes = {r.scene for r in records}
-        record = TeachRecord(label, label_scores(label, scenes), pose, time.time(), source, notes)
+        record = TeachRecord(label, label_scores(label), pose, time.time(), source, notes)
         records = append_record(record, records_path, legacy_joint=joint)
         if link is not None and link.armed:
             _act(link, pose, session.say)
@@ -316,7 +328,7 @@ def _train(
         return None
     session.say(f"Learning from {len(records)} teach records...")
     learner = ActionLearner(
-        max_iter=max(1, args.iterations),
+        max_iter=args.iterations,
         confidence_threshold=settings.confidence_threshold,
         home={j.name: j.home_angle for j in settings.joints},
     )
@@ -353,12 +365,13 @@ def _record_pose(
         raise ServantError("recording reads the arm's positions: start `servant teach` with --port")
     words = answer.split()
     try:
-        seconds = float(words[1]) if len(words) > 1 else RECORD_SECONDS
+        duration = float(words[1]) if len(words) > 1 else RECORD_SECONDS
     except ValueError:
         raise ServantError(f"{words[1]!r} is not a number of seconds") from None
+    duration = seconds(duration, "a recording", MAX_RECORD_S, zero=True)  # before disarming
     link.disarm()  # the user guides the arm: it must not fight back
-    session.say(f"Recording for {seconds:g} s: guide the arm into the pose.")
-    samples = link.record(seconds)
+    session.say(f"Recording for {duration:g} s: guide the arm into the pose.")
+    samples = link.record(duration)
     if not samples[-1]:
         raise ServantError("the controller reported no joint positions; move the arm and try again")
     pose, notes = clamp_pose(link.joints, samples[-1])

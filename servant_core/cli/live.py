@@ -16,6 +16,7 @@ import sys
 import time
 from typing import Any
 
+from servant_core.cli.options import finite_float, sample_rate
 from servant_core.engine import Engine, LiveSettings, build_demo_engine, build_live_engine
 from servant_core.errors import ServantError
 from servant_core.event_text import confidence_text, place
@@ -50,7 +51,6 @@ def register(subparsers: Any) -> None:
         "run",
         help="recognise scenes from the live microphone and camera, and move the arm",
         description=RUN_DESCRIPTION,
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     run.add_argument(
         "--model",
@@ -62,7 +62,9 @@ def register(subparsers: Any) -> None:
         help="input device index or name (default: Settings, else the "
         "system's default input; see --list-devices)",
     )
-    run.add_argument("--rate", type=int, help="sample rate in Hz (default: the device's own)")
+    run.add_argument(
+        "--rate", type=sample_rate, help="sample rate in Hz (default: the device's own)"
+    )
     run.add_argument("--no-mic", action="store_true", help="do not listen")
     run.add_argument(
         "--camera", help="camera index, video file or image pattern (default: Settings, else 0)"
@@ -94,7 +96,6 @@ def register(subparsers: Any) -> None:
         "demo",
         help="the built-in demo scenes (no microphone, camera or arm needed)",
         description=DEMO_DESCRIPTION,
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     demo.add_argument("--seed", type=int, default=0, help="seed of the synthesised scenes")
     demo.add_argument(
@@ -112,7 +113,11 @@ def register(subparsers: Any) -> None:
 
 def _common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--headless", action="store_true", help="print lines, no terminal UI")
-    parser.add_argument("--duration", type=float, help="stop after this many seconds")
+    parser.add_argument(
+        "--duration",
+        type=finite_float(0.0, 7 * 24 * 3600.0),
+        help="stop after this many seconds (default: run until Ctrl-C)",
+    )
     parser.add_argument("--json", action="store_true", help="one JSON object per event")
 
 

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections import Counter
 from pathlib import Path
 from typing import Any, cast
 
 from servant_core.audio import DEFAULT_RATE, DEFAULT_WINDOW_SECONDS, cut_windows, read_audio
-from servant_core.cli import emit
+from servant_core.cli import emit, one_line, options
+from servant_core.engine import FRESH_METHODS
 from servant_core.errors import ServantError
 from servant_core.evaluate import (
     IMAGE_TRAIN_FRACTION,
@@ -22,6 +24,7 @@ from servant_core.evaluate import (
 from servant_core.fusion import POLICIES, FusionConfig
 from servant_core.library import SceneLibrary, featurize_recordings, read_picture, read_pictures
 from servant_core.modelfile import load_model, save_model
+from servant_core.progress import Progress
 from servant_core.recognisers import (
     ACOUSTIC_METHODS,
     VISUAL_METHODS,
@@ -36,34 +39,46 @@ from servant_core.storage import data_dir
 def register(subparsers: argparse._SubParsersAction) -> None:
     train = subparsers.add_parser("train", help="train the recognisers on a scene library")
     train.add_argument("root", type=Path, help="scene library: ROOT/<scene>/<recordings, pictures>")
-    train.add_argument("-o", "--output", type=Path, help="model file (default: the user data dir)")
+    train.add_argument(
+        "-o", "--output", type=Path, help="model file (default: models/model.npz in the data dir)"
+    )
     _method_options(train)
     _audio_options(train)
     train.add_argument(
-        "--skip-bad", action="store_true", help="skip unreadable files (warn) instead of stopping"
+        "--skip-bad",
+        action="store_true",
+        help="skip unreadable or damaged files (with a warning) instead of stopping",
     )
-    train.add_argument("--json", action="store_true")
+    _json_option(train)
     train.set_defaults(handler=cmd_train)
 
     predict = subparsers.add_parser(
         "predict", help="recognise a recording and/or pictures with a model"
     )
-    predict.add_argument("model", type=Path)
+    predict.add_argument("model", type=Path, help="model file from `servant train`")
     predict.add_argument("--audio", type=Path, help="a recording: each window is recognised")
     predict.add_argument("--image", type=Path, nargs="+", default=[], help="pictures, in order")
     _fusion_options(predict)
-    predict.add_argument("--json", action="store_true")
+    _json_option(predict)
     predict.set_defaults(handler=cmd_predict)
 
     evaluate = subparsers.add_parser("eval", help="evaluate a method on a scene library")
     senses = evaluate.add_subparsers(dest="sense", metavar="SENSE", required=True)
     audio = senses.add_parser("audio", help="acoustic recognition: temporal or recording protocol")
-    audio.add_argument("root", type=Path)
-    audio.add_argument("--protocol", choices=["temporal", "recording"], default="temporal")
-    audio.add_argument("--method", choices=sorted(ACOUSTIC_METHODS), default="paper")
+    audio.add_argument("root", type=Path, help="scene library: ROOT/<scene>/<recordings>")
+    audio.add_argument(
+        "--protocol",
+        choices=["temporal", "recording"],
+        default="temporal",
+        help="temporal: the first 60%% of each recording's windows train, the rest test; "
+        "recording: leave each recording out in turn",
+    )
+    audio.add_argument(
+        "--method", choices=sorted(ACOUSTIC_METHODS), default="paper", help="acoustic method"
+    )
     audio.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
     _audio_options(audio)
-    audio.add_argument("--json", action="store_true")
+    _json_option(audio)
     audio.set_defaults(handler=cmd_eval_audio)
     image = senses.add_parser("image", help="visual recognition: train library vs test library")
     image.add_argument("root", type=Path, help="training pictures")
@@ -72,65 +87,104 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     image.add_argument(
         "--split",
-        type=float,
+        type=options.open_fraction,
         default=IMAGE_TRAIN_FRACTION,
         help="without --test: fraction of each scene's files (by name) that train",
     )
-    image.add_argument("--method", choices=sorted(VISUAL_METHODS), default="paper")
+    image.add_argument(
+        "--method", choices=sorted(VISUAL_METHODS), default="paper", help="visual method"
+    )
     image.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
-    image.add_argument("--json", action="store_true")
+    _json_option(image)
     image.set_defaults(handler=cmd_eval_image)
     fusion = senses.add_parser("fusion", help="fused decisions over paired windows and pictures")
     fusion.add_argument("root", type=Path, help="library with recordings and pictures per scene")
     _method_options(fusion)
     fusion.add_argument("--scenes", help="comma-separated scenes to keep (default: all paired)")
     _fusion_options(fusion)
-    fusion.add_argument("--json", action="store_true")
+    _json_option(fusion)
     fusion.set_defaults(handler=cmd_eval_fusion)
 
     table = subparsers.add_parser("table", help="the paper's Table I and Table II for a library")
-    table.add_argument("library", type=Path)
+    table.add_argument("library", type=Path, help="scene library with recordings and pictures")
     table.add_argument("--test", type=Path, help="take the test recording and picture from here")
     table.add_argument(
         "--scenes", help="comma-separated scenes (default: all with sound and pictures)"
     )
-    _method_options(table)
-    table.add_argument("--json", action="store_true")
+    _method_options(table, paper=True)
+    _json_option(table)
     table.set_defaults(handler=cmd_table)
 
 
-def _method_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--audio-method", choices=sorted(ACOUSTIC_METHODS), default="paper")
-    parser.add_argument("--image-method", choices=sorted(VISUAL_METHODS), default="paper")
+def _json_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", action="store_true", help="print JSON instead of text")
+
+
+def _method_options(parser: argparse.ArgumentParser, paper: bool = False) -> None:
+    """`--audio-method`, `--image-method`: the better methods by default (the engine's choice
+    for fresh models), the paper's for `table`, which reproduces the paper."""
+    parser.add_argument(
+        "--audio-method",
+        choices=sorted(ACOUSTIC_METHODS),
+        default="paper" if paper else FRESH_METHODS["audio"],
+        help="acoustic method (paper: the paper's FFT K-Means)",
+    )
+    parser.add_argument(
+        "--image-method",
+        choices=sorted(VISUAL_METHODS),
+        default="paper" if paper else FRESH_METHODS["image"],
+        help="visual method (paper: the paper's dominant colours)",
+    )
 
 
 def _audio_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--rate",
-        type=int,
+        type=options.sample_rate,
         help=f"model sample rate (Hz); default: the method's own ({DEFAULT_RATE} for paper)",
     )
     parser.add_argument(
-        "--window", type=float, default=DEFAULT_WINDOW_SECONDS, help="window length (s)"
+        "--window",
+        type=options.window_seconds,
+        default=DEFAULT_WINDOW_SECONDS,
+        help="window length (s)",
     )
 
 
 def _fusion_options(parser: argparse.ArgumentParser) -> None:
     defaults = FusionConfig()
-    parser.add_argument("--policy", choices=sorted(POLICIES), default="sequential")
-    parser.add_argument("--acoustic-window", type=float, default=defaults.acoustic_window_s)
-    parser.add_argument("--confirm-window", type=float, default=defaults.confirm_window_s)
-    parser.add_argument("--pictures", type=int, default=defaults.pictures_needed)
+    parser.add_argument(
+        "--policy",
+        choices=sorted(POLICIES),
+        default="sequential",
+        help="sequential: the paper's (hear, then look); parallel: both senses at once",
+    )
+    parser.add_argument(
+        "--acoustic-window",
+        type=options.fusion_seconds,
+        default=defaults.acoustic_window_s,
+        help="seconds an acoustic prediction waits for pictures to agree",
+    )
+    parser.add_argument(
+        "--confirm-window",
+        type=options.fusion_seconds,
+        default=defaults.confirm_window_s,
+        help="seconds within which the agreeing pictures must fall",
+    )
+    parser.add_argument(
+        "--pictures",
+        type=options.picture_count,
+        default=defaults.pictures_needed,
+        help="agreeing pictures needed to detect a scene",
+    )
 
 
 def _fusion_config(args: argparse.Namespace) -> FusionConfig:
-    if args.pictures < 1:
-        raise ServantError("--pictures must be at least 1")
     return FusionConfig(args.acoustic_window, args.confirm_window, args.pictures)
 
 
 def _warn(error: ServantError) -> None:
-    print(f"servant: warning: skipped {error}", file=sys.stderr)
+    print(f"servant: warning: skipped {one_line(str(error))}", file=sys.stderr)
 
 
 def _library(root: Path, scenes: str | None) -> SceneLibrary:
@@ -149,6 +203,10 @@ def _audio_params(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
+    if args.output is not None and args.output.is_dir():
+        raise ServantError(
+            f"{args.output}: is a folder; give a model file name such as {args.output}/model.npz"
+        )
     library = SceneLibrary.scan(args.root)
     on_error = _warn if args.skip_bad else None
     recognisers: dict[str, Recogniser] = {}
@@ -156,7 +214,12 @@ def cmd_train(args: argparse.Namespace) -> int:
     if len({r.scene for r in library.recordings}) >= 2:
         audio = make_audio_recogniser(args.audio_method, **_audio_params(args))
         wf = featurize_recordings(
-            library.recordings, audio.featurize, audio.rate, args.window, on_error
+            library.recordings,
+            audio.featurize,
+            audio.rate,
+            args.window,
+            on_error,
+            Progress("listening to recordings"),
         )
         audio.fit(wf.features, wf.scenes)
         recognisers["acoustic"] = audio
@@ -168,7 +231,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         summary["warnings"] += getattr(getattr(audio, "labels_", None), "warnings", list)()
     if len({p.scene for p in library.pictures}) >= 2:
         visual = make_recogniser("image", args.image_method)
-        images, kept = read_pictures(library.pictures, on_error)
+        images, kept = read_pictures(library.pictures, on_error, Progress("reading pictures"))
         visual.fit(visual.featurize(images), [p.scene for p in kept])
         recognisers["visual"] = visual
         summary["visual"] = {
@@ -281,16 +344,35 @@ def _format_scores(result: dict[str, Any]) -> str:
 
 
 def cmd_eval_audio(args: argparse.Namespace) -> int:
+    library = _library(args.root, args.scenes)
+    if args.protocol == "recording":
+        _check_recording_protocol(library)
     result = evaluate_audio(
-        _library(args.root, args.scenes), args.method, args.protocol, _audio_params(args), _warn
+        library,
+        args.method,
+        args.protocol,
+        _audio_params(args),
+        _warn,
+        Progress("listening to recordings"),
     )
     emit(args, result, _format_scores(result))
     return 0
 
 
+def _check_recording_protocol(library: SceneLibrary) -> None:
+    """Leaving a recording out must leave two scenes to train on, for at least one recording."""
+    per_scene = Counter(r.scene for r in library.recordings)
+    if len(per_scene) < 2 or (len(per_scene) == 2 and max(per_scene.values()) < 2):
+        found = ", ".join(f"{scene} {n}" for scene, n in sorted(per_scene.items())) or "none"
+        raise ServantError(
+            f"{library.root}: nothing to evaluate: the recording protocol trains without the "
+            "recording it tests, which leaves fewer than two scenes here (recordings per scene: "
+            f"{found}); add a second recording to a scene, a third scene, or use --protocol "
+            "temporal"
+        )
+
+
 def cmd_eval_image(args: argparse.Namespace) -> int:
-    if not 0.0 < args.split < 1.0:
-        raise ServantError("--split must be between 0 and 1")
     test = _library(args.test, args.scenes) if args.test else None
     result = evaluate_image(
         _library(args.root, args.scenes), test, args.method, args.split, on_error=_warn

@@ -11,6 +11,7 @@ row as a running mean, or a new scene gets its own centroid.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Self
@@ -206,12 +207,15 @@ class CentroidRecogniser:
             # A light linear step before the centroids: the directions that best separate the
             # training scenes (shrunk LDA, stable with fewer rows than dimensions). Below
             # MIN_DISCRIMINANT_ROWS rows of a scene the descriptors stay as they are.
+            self.projection_ = np.eye(D.shape[1])
             _, counts = np.unique(np.asarray(scenes), return_counts=True)
             if counts.min() >= MIN_DISCRIMINANT_ROWS:
-                lda = LinearDiscriminantAnalysis(solver="eigen", shrinkage="auto").fit(D, scenes)
-                self.projection_ = lda.scalings_[:, : len(lda.classes_) - 1]
-            else:
-                self.projection_ = np.eye(D.shape[1])
+                lda = LinearDiscriminantAnalysis(solver="eigen", shrinkage="auto")
+                # rows that are all alike (plain-colour pictures) leave no within-scene
+                # spread to factor: the descriptors then stay as they are
+                with contextlib.suppress(np.linalg.LinAlgError):
+                    lda.fit(D, scenes)
+                    self.projection_ = lda.scalings_[:, : len(lda.classes_) - 1]
             D = self._project(D)
         self.head_ = self._fit_head(D, scenes)
         if self.whitened_novelty:

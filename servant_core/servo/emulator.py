@@ -14,6 +14,7 @@ import select
 import threading
 import time
 import tty
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +27,7 @@ GARBAGE = b"\xff" * 8  # line noise, as a wrong baud rate gives; no protocol acc
 SSC32_VERSION = b"SSC32-V2.50USB"
 FIRMATA_VERSION = (2, 5)
 FIRMATA_DEFAULT_PULSES = (544, 2400)  # the Arduino Servo library's defaults
+HISTORY = 10_000  # targets kept for `history`: minutes of motion, bounded for long demo runs
 
 
 @dataclass
@@ -61,6 +63,8 @@ class ServoEmulator:
     """The controller's behaviour: `feed(request bytes) -> reply bytes`, positions by its clock.
 
     `fault` makes it misbehave on purpose: "silent" answers nothing, "garbage" answers nonsense.
+    `history()` gives the latest targets it was sent, `(clock time, channel, pulse us)`, as the
+    host commanded them (for Firmata the value written, before the Servo library clamps it).
     """
 
     def __init__(
@@ -80,6 +84,7 @@ class ServoEmulator:
         self.pin_modes: dict[int, int] = {}
         self.pin_states: dict[int, int] = {}
         self.servo_ranges: dict[int, tuple[int, int]] = {}
+        self._history: deque[tuple[float, int, float]] = deque(maxlen=HISTORY)
         self._pending = b""
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
@@ -99,6 +104,11 @@ class ServoEmulator:
             channel = self.channel(number)
             channel.update(self.clock())
             return channel.pulse
+
+    def history(self) -> list[tuple[float, int, float]]:
+        """The targets received, oldest first (the latest `HISTORY`)."""
+        with self._lock:
+            return list(self._history)
 
     def feed(self, data: bytes) -> bytes:
         """Take bytes from the host; return what the controller answers."""
@@ -147,6 +157,8 @@ class ServoEmulator:
             channel = self.channel(data[0])
             value = data[1] | data[2] << 7 if size == 3 else 0
             if command == maestro.SET_TARGET:
+                if value:
+                    self._history.append((now, data[0], value / 4))
                 channel.aim(value / 4 if value else None, now)
             elif command == maestro.SET_SPEED:
                 channel.aim(channel.target, now, speed=value * 25.0)
@@ -215,6 +227,7 @@ class ServoEmulator:
                 duration = max(duration, abs(spec["P"] - channel.pulse) / spec["S"])
         for number, spec in moves.items():
             channel = self.channel(number)
+            self._history.append((now, number, float(spec["P"])))
             distance = abs(spec["P"] - channel.pulse) if channel.pulse is not None else 0.0
             speed = distance / duration if duration > 0 else 0.0
             channel.aim(float(spec["P"]), now, speed=speed)
@@ -274,6 +287,7 @@ class ServoEmulator:
     def _firmata_write(self, pin: int, value: int) -> None:
         if self.pin_modes.get(pin) != firmata.PIN_MODE_SERVO:
             return
+        self._history.append((self.clock(), pin, float(value)))
         low, high = self.servo_ranges[pin]
         # The Servo library: below 544 the value is an angle; pulses are clamped to the range.
         pulse = low + (high - low) * min(value, 180) / 180 if value < 544 else value
@@ -289,11 +303,19 @@ class ServoEmulator:
         self._fds = (master, slave)
         self.port = os.ttyname(slave)
         if link is not None:
-            self._link = Path(link)
-            tmp = self._link.with_name(f".{self._link.name}.tmp")
-            tmp.unlink(missing_ok=True)
-            tmp.symlink_to(self.port)
-            os.replace(tmp, self._link)
+            path = Path(link)
+            tmp = path.with_name(f".{path.name}.tmp")
+            try:
+                tmp.unlink(missing_ok=True)
+                tmp.symlink_to(self.port)
+                os.replace(tmp, path)
+            except OSError as exc:
+                self.stop()
+                raise ServantError(
+                    f"{path}: cannot make it a link to the emulator's port ({exc.strerror}); "
+                    "give a path in a folder you can write to"
+                ) from exc
+            self._link = path
         self._stop.clear()
         self._thread = threading.Thread(
             target=self._serve, name=f"servo-emulator-{self.protocol}", daemon=True
@@ -318,6 +340,11 @@ class ServoEmulator:
                     os.write(master, reply)
                 except OSError:
                     return
+
+    @property
+    def serving(self) -> bool:
+        """Whether its pty is open: False once stopped (unplugged)."""
+        return self._fds is not None
 
     def stop(self) -> None:
         """Stop serving and close the pty: to the host this is the controller unplugged."""

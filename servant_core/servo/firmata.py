@@ -30,6 +30,7 @@ PIN_STATE_RESPONSE = 0x6E
 PIN_MODE_SERVO = 0x04
 SERVO_MICROSECONDS_FROM = 544  # StandardFirmata: below this a servo value is an angle
 MAX_PIN = 127
+MAX_STATE_BYTES = 3  # StandardFirmata sends a pin's 16-bit state in at most three 7-bit bytes
 
 
 def seven_bit(value: int, count: int = 2) -> bytes:
@@ -180,6 +181,11 @@ class Firmata:
                 return None
             message, size = found
             used += size
-            state = from_seven_bit(message[4:-1])
+            data = message[4:-1]
+            if len(data) > MAX_STATE_BYTES:
+                raise ProtocolError(
+                    f"a pin state of {len(data)} bytes (StandardFirmata sends {MAX_STATE_BYTES})"
+                )
+            state = from_seven_bit(data)
             pulses.append(float(state) if state >= SERVO_MICROSECONDS_FROM else None)
         return pulses, used

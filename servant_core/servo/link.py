@@ -5,14 +5,16 @@
 - Motion is rate-limited: each `step` moves a joint at most `max_speed_deg_s` times the time since
   the last step (at most `MAX_STEP_S`, so a late step never becomes a jump). Controllers that
   have a speed limit (Maestro, SSC-32) are given it as well.
-- Nothing moves unless the link is armed. Losing the port disarms it; when the port comes back,
-  `reconnect` (also tried by `arm` and `read_positions`) reopens it, still disarmed.
+- Nothing moves unless the link is armed. Any fault of the link (the port lost, no answer, an
+  answer that is not one) disarms it; when a lost port comes back, `reconnect` (also tried by
+  `arm` and `read_positions`) reopens it, still disarmed.
 - A dry run opens no port and hands every command's bytes to `on_bytes` instead.
 """
 
 from __future__ import annotations
 
 import errno
+import math
 import threading
 import time
 from collections import deque
@@ -31,14 +33,50 @@ from servant_core.settings import Joint
 MAX_STEP_S = 0.1
 POLL_S = 0.02  # how long one serial read waits before the link looks at its own deadline
 RECONNECT_EVERY_S = 1.0
+MAX_TIMEOUT_S = 60.0  # longer than any controller needs to answer; more looks like a hang
+MAX_RECORD_S = 600.0  # a recording is the user guiding the arm: minutes at most
+MAX_REPLY_BYTES = 4096  # far more than any reply this link asks for: the rest is line noise
 DRY_RUN_PORT = "dry-run"
 T = TypeVar("T")
 
+try:
+    import termios
 
-def open_serial(port: str, baudrate: int) -> serial.Serial:
-    """Open `port` exclusively, or say in one line why it cannot be opened."""
+    # pyserial lets termios.error (not an OSError) out of tcflush on a port whose device is gone.
+    PORT_ERRORS: tuple[type[BaseException], ...] = (serial.SerialException, OSError, termios.error)
+except ImportError:  # no termios on Windows
+    PORT_ERRORS = (serial.SerialException, OSError)
+
+
+def seconds(value: object, what: str, most: float, *, zero: bool = False) -> float:
+    """`value` as a number of seconds up to `most` (above 0 unless `zero`), or a one-line error.
+
+    NaN and infinity are refused: a deadline that never comes is a hang.
+    """
+    number = value if isinstance(value, int | float) and not isinstance(value, bool) else math.nan
+    if not ((0 <= number) if zero else (0 < number)) or not number <= most:
+        lowest = "0" if zero else "above 0"
+        raise ServantError(f"{what} must be {lowest} to {most:g} seconds, not {value!r}")
+    return float(number)
+
+
+def _reason(exc: BaseException) -> str:
+    """The words of a port error: termios.error carries `(errno, text)`, shown as a tuple."""
+    if len(exc.args) == 2 and isinstance(exc.args[1], str):
+        return exc.args[1]
+    return str(exc)
+
+
+def open_serial(port: str, baudrate: int) -> serial.SerialBase:
+    """Open `port` exclusively, or say in one line why it cannot be opened.
+
+    `port` is a device (/dev/ttyACM0, COM3) or a pyserial URL: `socket://host:port` reaches a
+    controller behind a network bridge, `loop://` and handlers of one's own serve tests.
+    """
     try:
-        return serial.Serial(port, baudrate, timeout=POLL_S, write_timeout=1.0, exclusive=True)
+        return serial.serial_for_url(
+            port, baudrate, timeout=POLL_S, write_timeout=1.0, exclusive=True
+        )
     except (serial.SerialException, OSError, ValueError) as exc:
         code = getattr(exc, "errno", None)
         text = str(exc)
@@ -50,6 +88,8 @@ def open_serial(port: str, baudrate: int) -> serial.Serial:
             reason = "the port is busy: another program has it open; close it and try again"
         elif code == errno.EACCES or "Permission denied" in text:
             reason = "permission denied; add yourself to the `dialout` group or fix the port's mode"
+        elif code in (errno.ENOTTY, errno.EISDIR) or "Inappropriate ioctl" in text:
+            reason = "not a serial port; `servant servo list-ports` lists the ports there are"
         else:
             reason = f"cannot open the port ({text})"
         raise ServantError(f"{port}: {reason}") from exc
@@ -87,13 +127,14 @@ class ServoLink:
         clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], None] = time.sleep,
         on_bytes: Callable[[bytes], None] | None = None,
+        reconnect_every: float = RECONNECT_EVERY_S,
     ) -> None:
         self.protocol = protocol
         self.joints = {j.name: j for j in joints}
         self.port = DRY_RUN_PORT if dry_run else port
         self.dry_run = dry_run
         self.baudrate = baudrate or protocol.baudrate
-        self.timeout = timeout
+        self.timeout = seconds(timeout, "the timeout", MAX_TIMEOUT_S)
         self.clock = clock
         self.sleep = sleep
         self.sent: deque[bytes] = deque(maxlen=1000)
@@ -104,8 +145,9 @@ class ServoLink:
         self.goal: dict[str, float] = {}
         self.notes: list[str] = []  # what the last `move_to` had to clamp
         self._commanded_at = 0.0
-        self._serial: serial.Serial | None = None
-        self._last_attempt = -RECONNECT_EVERY_S
+        self._serial: serial.SerialBase | None = None
+        self.reconnect_every = reconnect_every
+        self._last_attempt = -math.inf
         self._lock = threading.RLock()
 
     @classmethod
@@ -152,12 +194,12 @@ class ServoLink:
             raise
 
     def reconnect(self) -> bool:
-        """Reopen a lost port if it is back (tried at most once a second), still disarmed."""
+        """Reopen a lost port if it is back (tried at most every `reconnect_every` s), disarmed."""
         with self._lock:
             if self.connected:
                 return True
             now = time.monotonic()
-            if now - self._last_attempt < RECONNECT_EVERY_S:
+            if now - self._last_attempt < self.reconnect_every:
                 return False
             self._last_attempt = now
             try:
@@ -171,7 +213,7 @@ class ServoLink:
         if self._serial is not None:
             try:
                 self._serial.close()
-            except (serial.SerialException, OSError):
+            except PORT_ERRORS:
                 pass  # the port is gone already; closing is only tidying up
         self._serial = None
 
@@ -179,11 +221,11 @@ class ServoLink:
         """Run serial I/O; a lost port disarms the link and is said in one line."""
         try:
             return action()
-        except (serial.SerialException, OSError) as exc:
+        except PORT_ERRORS as exc:
             self._drop()
             raise ServantError(
-                f"{self.port}: the link to the {self.protocol.title} was lost ({exc}); the arm is "
-                "disarmed; reconnect the controller, then arm again"
+                f"{self.port}: the link to the {self.protocol.title} was lost ({_reason(exc)}); "
+                "the arm is disarmed; reconnect the controller, then arm again"
             ) from exc
 
     def _send(self, data: bytes) -> None:
@@ -195,7 +237,7 @@ class ServoLink:
         handle = self._require_serial()
         self._io(lambda: (handle.write(data), handle.flush()))
 
-    def _require_serial(self) -> serial.Serial:
+    def _require_serial(self) -> serial.SerialBase:
         if self._serial is None and not self.reconnect():
             raise ServantError(
                 f"{self.port}: the {self.protocol.title} is not connected; "
@@ -205,7 +247,11 @@ class ServoLink:
         return self._serial
 
     def _exchange(self, request: bytes, parse: Callable[[bytes], tuple[T, int] | None]) -> T:
-        """Send `request` and read until `parse` accepts the reply, within `timeout` seconds."""
+        """Send `request` and read until `parse` accepts the reply, within `timeout` seconds.
+
+        A controller that does not answer, or answers nonsense, disarms the link: what it does
+        with the next command is anyone's guess. The port stays open, to arm again.
+        """
         handle = self._require_serial()
         self._io(handle.reset_input_buffer)
         self._send(request)
@@ -213,8 +259,11 @@ class ServoLink:
         buffer = b""
         while True:
             try:
+                if len(buffer) > MAX_REPLY_BYTES:
+                    raise ProtocolError(f"{len(buffer)} bytes and still no complete reply")
                 parsed = parse(buffer)
             except ProtocolError as exc:
+                self.disarm()
                 self._io(handle.reset_input_buffer)
                 raise ServantError(
                     f"{self.port}: the controller sent bytes that are not a "
@@ -224,12 +273,13 @@ class ServoLink:
             if parsed is not None:
                 return parsed[0]
             if time.monotonic() > deadline:
+                self.disarm()
                 raise ServantError(
                     f"{self.port}: no answer from a {self.protocol.title} "
                     f"within {self.timeout:g} s; "
                     "check it is powered and that the protocol and baud rate are right"
                 )
-            buffer += self._io(lambda: handle.read(max(1, handle.in_waiting)))
+            buffer += self._io(lambda: handle.read(max(1, min(handle.in_waiting, 1024))))
 
     # -- arming and moving ------------------------------------------------------------------
 
@@ -346,6 +396,8 @@ class ServoLink:
         report only what they are sent, so guiding by hand needs servos with position feedback;
         with others the user moves the arm through the controller and records where it ended.
         """
+        duration = seconds(duration, "a recording", MAX_RECORD_S, zero=True)
+        interval = seconds(interval, "the sampling interval", MAX_RECORD_S)
         samples = []
         end = self.clock() + duration
         while True:

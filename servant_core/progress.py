@@ -1,0 +1,72 @@
+"""Progress of a long step on stderr: a bar with a count and an estimate of the time left.
+
+`Progress` is an `on_progress(done, total)` callback (the one `servant_core.library` calls after
+each file), so any front end can pass its own instead. On a terminal it redraws one line;
+anywhere else (a pipe, a log file, a test) it stays silent, so output that is read by programs
+is never mixed with bars.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+from typing import TextIO
+
+BAR_WIDTH = 24
+
+
+def bar_line(label: str, done: int, total: int, elapsed: float) -> str:
+    """`label [#######.....] 12/40  0:35 left` (pure: the estimate assumes a steady pace)."""
+    total = max(total, 1)
+    done = min(max(done, 0), total)
+    filled = BAR_WIDTH * done // total
+    bar = "#" * filled + "." * (BAR_WIDTH - filled)
+    if done == total:
+        tail = f"done in {_clock(elapsed)}"
+    elif done == 0:
+        tail = ""
+    else:
+        tail = f"{_clock(elapsed / done * (total - done))} left"
+    return f"{label} [{bar}] {done}/{total}  {tail}".rstrip()
+
+
+def _clock(seconds: float) -> str:
+    minutes, secs = divmod(int(round(seconds)), 60)
+    hours, minutes = divmod(minutes, 60)
+    return f"{hours}:{minutes:02d}:{secs:02d}" if hours else f"{minutes}:{secs:02d}"
+
+
+class Progress:
+    """A bar for one step; call it as `on_progress(done, total)`.
+
+    It draws only when `stream` is a terminal; redraws at most `interval` seconds apart (and at
+    the end), and ends its line when the step is done.
+    """
+
+    def __init__(
+        self,
+        label: str,
+        stream: TextIO | None = None,
+        interval: float = 0.2,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.label = label
+        self.stream = stream if stream is not None else sys.stderr
+        self.interval = interval
+        self.clock = clock
+        self.started = clock()
+        self.drawn_at = -float("inf")
+        self.enabled = bool(getattr(self.stream, "isatty", lambda: False)())
+
+    def __call__(self, done: int, total: int) -> None:
+        if not self.enabled:
+            return
+        now = self.clock()
+        finished = done >= total
+        if not finished and now - self.drawn_at < self.interval:
+            return
+        self.drawn_at = now
+        line = bar_line(self.label, done, total, now - self.started)
+        self.stream.write("\r\x1b[K" + line + ("\n" if finished else ""))
+        self.stream.flush()

@@ -1,0 +1,111 @@
+"""Run the `servant` command line the way the fuzz and boundary tests need it.
+
+`run_cli` calls the entry point in-process (fast: thousands of calls a run) and captures what
+it prints; `run_cli_subprocess` runs the real console script in a child process, bounded in time
+and address space, and reports the child's own peak memory (from `os.wait4`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import resource
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from servant_core.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+ONE_GB = 1024**3
+
+
+@dataclass
+class Outcome:
+    code: int
+    out: str
+    err: str
+    seconds: float
+    peak_mb: float = 0.0
+
+
+def run_cli(*argv: str) -> Outcome:
+    """`servant ARGV` in this process; an exception other than SystemExit propagates (that is
+    a traceback the user would have seen, and fails the test)."""
+    out, err = io.StringIO(), io.StringIO()
+    start = time.perf_counter()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(list(argv))
+        except SystemExit as exit_:
+            code = exit_.code if isinstance(exit_.code, int) else 2
+    return Outcome(code, out.getvalue(), err.getvalue(), time.perf_counter() - start)
+
+
+def assert_clear(outcome: Outcome, seconds: float = 30.0) -> None:
+    """Success, or exactly one `servant: error: ...` line and exit status 2; never a traceback
+    nor a hang."""
+    assert "Traceback" not in outcome.err, outcome.err
+    assert outcome.seconds < seconds, f"took {outcome.seconds:.1f} s"
+    if outcome.code != 0:
+        assert outcome.code == 2, (outcome.code, outcome.err)
+        lines = [line for line in outcome.err.splitlines() if not line.startswith("servant: warn")]
+        assert len(lines) == 1 and lines[0].startswith("servant: error: "), outcome.err
+
+
+def assert_refused(outcome: Outcome, *words: str) -> None:
+    assert outcome.code == 2, (outcome.code, outcome.out, outcome.err)
+    assert_clear(outcome)
+    for word in words:
+        assert word in outcome.err, outcome.err
+
+
+def run_cli_subprocess(
+    *argv: str, timeout: float = 60.0, address_space: int = 4 * ONE_GB, file_size: int = -1
+) -> Outcome:
+    """The console script in a child: killed after `timeout`, its address space capped (a
+    runaway allocation fails there, not on the machine), `peak_mb` its maximum resident size."""
+
+    def limits() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (address_space, address_space))
+        if file_size >= 0:
+            resource.setrlimit(resource.RLIMIT_FSIZE, (file_size, file_size))
+
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    start = time.perf_counter()
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+        child = subprocess.Popen(
+            [
+                sys.executable,
+                "-c",
+                "import sys; from servant_tui.main import main; sys.exit(main())",
+            ]
+            + list(argv),
+            stdout=out,
+            stderr=err,
+            preexec_fn=limits,
+            cwd=REPO,
+            env=env,
+        )
+        timer = threading.Timer(timeout, lambda: os.kill(child.pid, signal.SIGKILL))
+        timer.start()
+        try:
+            _, status, usage = os.wait4(child.pid, 0)
+        finally:
+            timer.cancel()
+            child.returncode = 0  # reaped by wait4 above; keeps Popen from waiting again
+        out.seek(0)
+        err.seek(0)
+        return Outcome(
+            os.waitstatus_to_exitcode(status),
+            out.read().decode(errors="replace"),
+            err.read().decode(errors="replace"),
+            time.perf_counter() - start,
+            usage.ru_maxrss / 1024,
+        )
