@@ -699,12 +699,17 @@ class Engine:
         with self._lock:
             return {sense: dict(scores) for sense, scores in self._scores.items()}
 
-    def retrain(self, library: SceneLibrary | str | Path) -> None:
+    def retrain(
+        self,
+        library: SceneLibrary | str | Path,
+        on_progress: Callable[[int, int], None] | None = None,
+    ) -> None:
         """Refit copies of both recognisers on a scene library, then swap them in (the senses keep
         running on the old ones meanwhile). A sense without a recogniser gets a new one of its
         `fresh_methods` method. Unreadable files are reported and skipped. A sense that cannot
         be trained (e.g. pictures of one scene only) is reported and keeps its recogniser while
-        the other is retrained; if neither can be, the first reason is raised."""
+        the other is retrained; if neither can be, the first reason is raised. `on_progress(done,
+        total)` is called after each file read, recordings then pictures, on this thread."""
         if not isinstance(library, SceneLibrary):
             library = SceneLibrary.scan(library)
         with self._update_lock:
@@ -712,12 +717,15 @@ class Engine:
                 acoustic, visual = self.acoustic, self.visual
             new_acoustic = new_visual = None
             failures: list[ServantError] = []
+            total, heard = len(library.recordings) + len(library.pictures), len(library.recordings)
+            sound_done = progress_part(on_progress, 0, total)
+            visual_done = progress_part(on_progress, heard, total)
             try:
-                new_acoustic = self._refit_acoustic(library, acoustic)
+                new_acoustic = self._refit_acoustic(library, acoustic, sound_done)
             except ServantError as error:
                 failures.append(ServantError(f"retrain (sound): {error}"))
             try:
-                new_visual = self._refit_visual(library, visual)
+                new_visual = self._refit_visual(library, visual, visual_done)
             except ServantError as error:
                 failures.append(ServantError(f"retrain (pictures): {error}"))
             if new_acoustic is None and new_visual is None:
@@ -732,7 +740,9 @@ class Engine:
                 self.retrain_needed = False
             self._save_models()
 
-    def _refit_acoustic(self, library: SceneLibrary, acoustic: Recogniser | None) -> Any:
+    def _refit_acoustic(
+        self, library: SceneLibrary, acoustic: Recogniser | None, on_progress: Any = None
+    ) -> Any:
         """A copy of `acoustic` (or a fresh one) fitted on the library's windows; None if none."""
         if not library.recordings:
             return None
@@ -743,15 +753,20 @@ class Engine:
             rate=getattr(model, "rate", DEFAULT_RATE),
             seconds=self.window_seconds,
             on_error=lambda e: self._error(str(e)),
+            on_progress=on_progress,
         )
         return model.fit(windows.features, list(windows.scenes))
 
-    def _refit_visual(self, library: SceneLibrary, visual: Recogniser | None) -> Any:
+    def _refit_visual(
+        self, library: SceneLibrary, visual: Recogniser | None, on_progress: Any = None
+    ) -> Any:
         """A copy of `visual` (or a fresh one) fitted on the library's pictures; None if none."""
         if not library.pictures:
             return None
         model = self._copy_or_fresh(visual, "image")
-        images, kept = read_pictures(library.pictures, on_error=lambda e: self._error(str(e)))
+        images, kept = read_pictures(
+            library.pictures, on_error=lambda e: self._error(str(e)), on_progress=on_progress
+        )
         if not images:
             return None
         return model.fit(model.featurize(images), [p.scene for p in kept])
@@ -840,6 +855,17 @@ class Engine:
             )
 
 
+def progress_part(
+    on_progress: Callable[[int, int], None] | None, offset: int, total: int
+) -> Callable[[int, int], None] | None:
+    """A part of a job reports `(done, its own total)`; the job's `on_progress` hears
+    `(offset + done, total)`, so one bar runs over every part without going back."""
+    if on_progress is None:
+        return None
+    report = on_progress
+    return lambda done, _part_total: report(offset + done, total)
+
+
 def decision_unit(*recognisers: Recogniser | None) -> str | None:
     """The unit of an average of these recognisers' confidences (a decision's): theirs when they
     all share one, as percentages do; else None (the paper's eq. 1 and eq. 2 share none)."""
@@ -870,6 +896,7 @@ def build_demo_engine(
     library_root: str | Path | None = None,
     arm: bool = True,
     paper: bool = False,
+    on_progress: Callable[[int, int], None] | None = None,
 ) -> Engine:
     """The built-in demo: recognisers trained on freshly synthesised scenes (a couple of seconds),
     then the synthesised walk (see `servant_core.demo.scenes`). By default Servant at its best:
@@ -878,6 +905,7 @@ def build_demo_engine(
     emulated arm (`servant_core.demo.arm`), disarmed, that the engine closes when it stops. With
     `library_root`, the demo's training scenes are written there as a scene library (the demo's
     own throw-away space: see `servant_core.demo.space`), for the library screen and retrains.
+    `on_progress(done, total)` follows the training (the start-up's slow part).
 
     `realtime=False` runs the walk as fast as possible on a `ManualClock` (pass your own to read
     it), so events — times included — are the same on every run: use `engine.run_until(t)` for a
@@ -894,7 +922,7 @@ def build_demo_engine(
     if not realtime:
         clock = clock if isinstance(clock, ManualClock) else ManualClock()
     clock = clock or MonotonicClock()
-    acoustic, visual = train_demo_recognisers(seed, paper=paper)
+    acoustic, visual = train_demo_recognisers(seed, paper=paper, on_progress=on_progress)
     if library_root is not None:
         write_demo_library(library_root, seed)
     audio = demo_audio(seed, realtime=realtime, clock=clock if not realtime else None)

@@ -18,6 +18,7 @@ from servant_core.cli.live import build_run_engine
 from servant_core.demo.space import throwaway_space
 from servant_core.engine import build_demo_engine
 from servant_core.errors import ServantError
+from servant_core.progress import Progress
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -45,12 +46,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return run_tui(lambda: build_run_engine(args if args.command else None), "live")
     if args.command == "demo" and not headless and not args.fast:
         with throwaway_space() as space:
-            print(
-                "servant: training the demo's recognisers on synthesised scenes…", file=sys.stderr
-            )
             return run_tui(
                 lambda: build_demo_engine(
-                    args.seed, paper=args.paper, library_root=space / "library"
+                    args.seed,
+                    paper=args.paper,
+                    library_root=space / "library",
+                    on_progress=Progress("servant demo: learning the demo's places"),
                 ),
                 "demo",
             )

@@ -153,3 +153,9 @@ def test_servant_run_headless_on_a_video_camera_without_microphone(tmp_path):
     result = servant("run", "--headless", "--no-mic", "--camera", str(path), "--duration", "0.3")
     assert result.returncode == 0, result.stderr
     assert f"camera ok: video {path}: ready" in result.stdout
+
+
+def test_the_demos_start_up_reports_its_progress():
+    seen: list[tuple[int, int]] = []
+    train_demo_recognisers(seed=0, paper=False, on_progress=lambda d, t: seen.append((d, t)))
+    assert seen == [(k, len(SCENES) + 2) for k in range(1, len(SCENES) + 3)]

@@ -271,3 +271,14 @@ def test_a_missing_camera_is_one_line_of_ours_not_opencvs_warnings():
     assert result.returncode == 0, result.stderr
     assert "WARN" not in result.stderr and "VIDEOIO" not in result.stderr, result.stderr
     assert "camera PROBLEM: camera 7: no such camera" in result.stdout
+
+
+def test_a_retrain_reports_its_progress_over_sound_then_pictures(tmp_path):
+    from servant_core.engine import Engine
+    from servant_core.library import SceneLibrary
+
+    library = SceneLibrary.scan(write_demo_library(tmp_path / "library"))
+    seen: list[tuple[int, int]] = []
+    Engine().retrain(library, on_progress=lambda done, total: seen.append((done, total)))
+    total = len(library.recordings) + len(library.pictures)
+    assert seen == [(k, total) for k in range(1, total + 1)]

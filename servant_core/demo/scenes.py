@@ -92,9 +92,13 @@ def synth_picture(scene: str, rng: np.random.Generator) -> np.ndarray:
 
 
 def training_set(
-    seed: int = 0, windows_per_scene: int = 6, pictures_per_scene: int = 6
+    seed: int = 0,
+    windows_per_scene: int = 6,
+    pictures_per_scene: int = 6,
+    on_progress: Callable[[int, int], None] | None = None,
 ) -> tuple[np.ndarray, list[str], list[np.ndarray], list[str]]:
-    """(windows (n, samples) at DEMO_RATE, their scenes, pictures, their scenes)."""
+    """(windows (n, samples) at DEMO_RATE, their scenes, pictures, their scenes);
+    `on_progress(done, total)` after each scene's windows and pictures."""
     windows, window_scenes, pictures, picture_scenes = [], [], [], []
     for s, scene in enumerate(SCENES):
         for i in range(windows_per_scene):
@@ -103,6 +107,8 @@ def training_set(
         for i in range(pictures_per_scene):
             pictures.append(synth_picture(scene, np.random.default_rng([seed, TRAIN, s, 1, i])))
             picture_scenes.append(scene)
+        if on_progress is not None:
+            on_progress(s + 1, len(SCENES))
     return np.stack(windows), window_scenes, pictures, picture_scenes
 
 
@@ -120,16 +126,29 @@ def demo_recognisers(seed: int = 0, *, paper: bool = True) -> tuple[Any, Any]:
 
 
 def train_demo_recognisers(
-    seed: int = 0, windows_per_scene: int = 6, pictures_per_scene: int = 6, *, paper: bool = True
+    seed: int = 0,
+    windows_per_scene: int = 6,
+    pictures_per_scene: int = 6,
+    *,
+    paper: bool = True,
+    on_progress: Callable[[int, int], None] | None = None,
 ) -> tuple[Any, Any]:
     """The demo's two recognisers (see `demo_recognisers`), fitted on freshly synthesised scenes
-    (a second or two)."""
+    (a second or two); `on_progress(done, total)` after each scene synthesised and each fit."""
+    total = len(SCENES) + 2
+
+    def report(done: int, _total: int = total) -> None:
+        if on_progress is not None:
+            on_progress(done, total)
+
     windows, window_scenes, pictures, picture_scenes = training_set(
-        seed, windows_per_scene, pictures_per_scene
+        seed, windows_per_scene, pictures_per_scene, report
     )
     acoustic, visual = demo_recognisers(seed, paper=paper)
     acoustic.fit(acoustic.featurize(windows), window_scenes)
+    report(len(SCENES) + 1)
     visual.fit(visual.featurize(pictures), picture_scenes)
+    report(total)
     return acoustic, visual
 
 
