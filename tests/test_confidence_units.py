@@ -4,6 +4,7 @@ audio, with the equation's name."""
 
 from __future__ import annotations
 
+import numpy as np
 from textual.geometry import Region
 
 from servant_core.engine import decision_unit
@@ -60,3 +61,22 @@ async def test_paper_confidences_are_shown_with_their_equation_and_no_percent(tm
     assert "hears street (-6434.0 eq. 1)" in log and "sees street (36.9 eq. 2)" in log
     assert "StreetScene detected (-3198.5)" in log
     assert "%" not in log
+
+
+def test_servant_predict_says_each_confidences_unit(tmp_path, capsys):
+    """`servant predict` printed `confidence -24903.178`, a number a reader cannot place."""
+    from servant_core.audio import write_wav
+    from servant_core.cli import main
+    from servant_core.demo.audio_synth import DEMO_RATE
+    from servant_core.demo.scenes import synth_window, write_demo_library
+
+    library = write_demo_library(tmp_path / "library")
+    clip = write_wav(tmp_path / "clip.wav", synth_window("gym", np.random.default_rng(5)), DEMO_RATE)
+    for method, unit in (("paper", "eq. 1"), ("codebook", "%")):
+        model = tmp_path / f"{method}.npz"
+        argv = ["train", str(library), "-o", str(model), "--audio-method", method]
+        assert main([*argv, "--rate", str(DEMO_RATE)]) == 0
+        capsys.readouterr()
+        assert main(["predict", str(model), "--audio", str(clip)]) == 0
+        line = capsys.readouterr().out.strip().splitlines()[0]
+        assert line.startswith("Acoustic window 0: ") and line.endswith(f" {unit})"), line

@@ -10,7 +10,7 @@ from typing import Any, cast
 
 from servant_core.audio import DEFAULT_RATE, DEFAULT_WINDOW_SECONDS, cut_windows, read_audio
 from servant_core.cli import emit, one_line, options
-from servant_core.engine import FRESH_METHODS
+from servant_core.engine import FRESH_METHODS, decision_unit
 from servant_core.errors import ServantError
 from servant_core.evaluate import (
     IMAGE_TRAIN_FRACTION,
@@ -21,12 +21,14 @@ from servant_core.evaluate import (
     paper_tables,
     run_fusion,
 )
+from servant_core.event_text import confidence_text, place
 from servant_core.fusion import POLICIES, FusionConfig
 from servant_core.library import SceneLibrary, featurize_recordings, read_picture, read_pictures
 from servant_core.modelfile import load_model, save_model
 from servant_core.progress import Progress
 from servant_core.recognisers import (
     ACOUSTIC_METHODS,
+    UNKNOWN,
     VISUAL_METHODS,
     AcousticRecogniser,
     Recogniser,
@@ -278,12 +280,13 @@ def cmd_predict(args: argparse.Namespace) -> int:
             )
         X = audio.featurize(windows)
         scenes, confidences = audio.predict(X), audio.confidence(X)
+        unit = audio.confidence_unit
         result["acoustic"] = [
-            {"window": i, "scene": str(s), "confidence": float(c)}
+            {"window": i, "scene": str(s), "confidence": float(c), "confidence_unit": unit}
             for i, (s, c) in enumerate(zip(scenes, confidences, strict=True))
         ]
         lines += [
-            f"Acoustic window {i}: {s} (confidence {c:.3f})"
+            f"Acoustic window {i}: {_judged(str(s), float(c), unit)}"
             for i, (s, c) in enumerate(zip(scenes, confidences, strict=True))
         ]
         first_acoustic = (str(scenes[0]), float(confidences[0]))
@@ -293,24 +296,36 @@ def cmd_predict(args: argparse.Namespace) -> int:
         X = visual.featurize([read_picture(p) for p in args.image])
         scenes, confidences = visual.predict(X), visual.confidence(X)
         visual_predictions = [(str(s), float(c)) for s, c in zip(scenes, confidences, strict=True)]
+        unit = visual.confidence_unit
         result["visual"] = [
-            {"picture": str(p), "scene": s, "confidence": c}
+            {"picture": str(p), "scene": s, "confidence": c, "confidence_unit": unit}
             for p, (s, c) in zip(args.image, visual_predictions, strict=True)
         ]
         lines += [
-            f"Visual {p.name}: {s} (confidence {c:.3f})"
+            f"Visual {p.name}: {_judged(s, c, unit)}"
             for p, (s, c) in zip(args.image, visual_predictions, strict=True)
         ]
     if first_acoustic is not None and visual_predictions:
         decision = run_fusion(args.policy, _fusion_config(args), first_acoustic, visual_predictions)
+        shared = decision_unit(model.get("acoustic"), model.get("visual"))
         result["decision"] = {
             "scene": decision.scene,
             "line": decision.line,
             "confidence": decision.confidence,
+            "confidence_unit": shared,
         }
-        lines.append(f"{decision.line} (average confidence {decision.confidence:.3f})")
+        average = confidence_text(decision.confidence, shared)
+        lines.append(f"{decision.line} (average confidence {average})")
     emit(args, result, "\n".join(lines))
     return 0
+
+
+def _judged(scene: str, confidence: float, unit: str | None) -> str:
+    """A prediction in words: the scene and its confidence with its unit ("coffee (confidence
+    88.0 %)", "street (confidence -6434.0 eq. 1)"); an unknown place has no confidence to show."""
+    if scene == UNKNOWN:
+        return place(None)
+    return f"{scene} (confidence {confidence_text(confidence, unit)})"
 
 
 def _role(model: dict[str, Recogniser], role: str, path: Path) -> Recogniser:
