@@ -71,7 +71,9 @@ def test_servant_predict_says_each_confidences_unit(tmp_path, capsys):
     from servant_core.demo.scenes import synth_window, write_demo_library
 
     library = write_demo_library(tmp_path / "library")
-    clip = write_wav(tmp_path / "clip.wav", synth_window("gym", np.random.default_rng(5)), DEMO_RATE)
+    clip = write_wav(
+        tmp_path / "clip.wav", synth_window("gym", np.random.default_rng(5)), DEMO_RATE
+    )
     for method, unit in (("paper", "eq. 1"), ("codebook", "%")):
         model = tmp_path / f"{method}.npz"
         argv = ["train", str(library), "-o", str(model), "--audio-method", method]
