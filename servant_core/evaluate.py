@@ -162,20 +162,33 @@ def fewshot_split(
     return temporal_split(recording, position, fraction) & (position < shots)
 
 
-def audio_folds(wf: WindowFeatures, protocol: str, shots: int = 1) -> list[np.ndarray]:
-    """Train masks over `wf`'s windows, one per fold; each fold tests where its mask is False
-    (`recording`: the left-out recording only; the others: the temporal test part)."""
+@dataclass
+class AudioPlan:
+    """One scored row: a model per fold fitted on `folds[i]` (train mask over the windows) and
+    tested on `tests[i]`; `shots` for a fewshot row."""
+
+    protocol: str
+    folds: list[np.ndarray]
+    tests: list[np.ndarray]
+    shots: int | None = None
+
+
+def audio_plans(
+    wf: WindowFeatures, protocol: str, shots: Sequence[int] = DEFAULT_SHOTS
+) -> list[AudioPlan]:
+    """The folds of `protocol` over `wf`'s windows: `temporal` one fold, `recording` one per
+    recording (tested on it alone), `fewshot` one row per number of shots (each tested on the
+    temporal test part)."""
+    temporal = temporal_split(wf.recording, wf.position)
     if protocol == "temporal":
-        return [temporal_split(wf.recording, wf.position)]
+        return [AudioPlan(protocol, [temporal], [~temporal])]
     if protocol == "fewshot":
-        return [fewshot_split(wf.recording, wf.position, shots)]
-    return [wf.recording != r for r in np.unique(wf.recording)]
-
-
-def _test_mask(wf: WindowFeatures, protocol: str, train: np.ndarray) -> np.ndarray:
-    if protocol == "recording":
-        return ~train
-    return ~temporal_split(wf.recording, wf.position)
+        return [
+            AudioPlan(protocol, [fewshot_split(wf.recording, wf.position, k)], [~temporal], k)
+            for k in shots
+        ]
+    rows = [wf.recording != r for r in np.unique(wf.recording)]
+    return [AudioPlan(protocol, rows, [~row for row in rows])]
 
 
 def _seeded(
@@ -190,10 +203,8 @@ def _seeded(
 
 def _evaluate_folds(
     wf: WindowFeatures,
-    folds: Sequence[np.ndarray],
-    tests: Sequence[np.ndarray],
-    method: str,
-    params: dict[str, Any],
+    plan: AudioPlan,
+    make_model: Callable[[], Recogniser],
     names: Sequence[str],
 ) -> dict[str, Any]:
     """Fit one model per fold (train mask), predict its test mask, pool and score."""
@@ -201,13 +212,11 @@ def _evaluate_folds(
     tested: list[np.ndarray] = []  # the recording of each test window, in prediction order
     skipped: list[str] = []
     n_train = 0
-    for train, test in zip(folds, tests, strict=True):
+    for train, test in zip(plan.folds, plan.tests, strict=True):
         try:
-            model = make_audio_recogniser(method, **params).fit(
-                wf.features[train], wf.scenes[train]
-            )
+            model = make_model().fit(wf.features[train], wf.scenes[train])
         except ServantError as error:
-            if len(folds) == 1:
+            if len(plan.folds) == 1:
                 raise
             left_out = np.unique(wf.recording[test])
             skipped.append(f"{', '.join(Path(names[r]).name for r in left_out)}: {error}")
@@ -219,6 +228,29 @@ def _evaluate_folds(
     result["per_recording"] = per_recording(preds, np.concatenate(tested), names)
     result.update(n_train=n_train, skipped_folds=skipped)
     return result
+
+
+def evaluate_windows(
+    wf: WindowFeatures,
+    names: Sequence[str],
+    plans: Sequence[AudioPlan],
+    make_model: Callable[[int | None], Recogniser],
+    seeds: int = 1,
+) -> list[dict[str, Any]]:
+    """One scored row per plan; `make_model(seed)` gives a fresh model for a random state
+    (None: the method's own). Benchmarks score other methods through this same path."""
+    rows = []
+    for plan in plans:
+
+        def run(seed: int | None, plan: AudioPlan = plan) -> dict[str, Any]:
+            return _evaluate_folds(wf, plan, lambda: make_model(seed), names)
+
+        row = over_seeds(run, seeds)
+        row.update(protocol=plan.protocol, sense="audio", n_recordings=len(np.unique(wf.recording)))
+        if plan.shots is not None:
+            row["shots"] = plan.shots
+        rows.append(row)
+    return rows
 
 
 SEED_METRICS = ("accuracy", "balanced_accuracy", "log_loss", "unknown_rate")
@@ -297,36 +329,19 @@ def evaluate_audio(
         names += [str(r.path.relative_to(test_library.root)) for r in test_wf.recordings]
         train = np.arange(len(wf.scenes) + len(test_wf.scenes)) < len(wf.scenes)
         wf = _joined(wf, test_wf)
-        protocol = "train-test"
-        plans: list[tuple[int | None, list[np.ndarray], list[np.ndarray]]] = [
-            (None, [train], [~train])
-        ]
+        plans = [AudioPlan("train-test", [train], [~train])]
     else:
-        counts: Sequence[int | None] = shots if protocol == "fewshot" else [None]
-        plans = []
-        for k in counts:
-            folds = audio_folds(wf, protocol, k or 1)
-            plans.append((k, folds, [_test_mask(wf, protocol, f) for f in folds]))
-
-    rows = []
-    for k, folds, tests in plans:
-
-        def run(seed: int | None, folds: list[np.ndarray] = folds, tests=tests) -> dict[str, Any]:
-            return _evaluate_folds(
-                wf, folds, tests, method, _seeded(params, method, "audio", seed), names
-            )
-
-        row = over_seeds(run, seeds)
-        row.update(
-            method=method,
-            protocol=protocol,
-            sense="audio",
-            n_recordings=len(np.unique(wf.recording)),
-        )
-        if k is not None:
-            row["shots"] = int(k)
-        rows.append(row)
-    if protocol != "fewshot":
+        plans = audio_plans(wf, protocol, shots)
+    rows = evaluate_windows(
+        wf,
+        names,
+        plans,
+        lambda seed: make_audio_recogniser(method, **_seeded(params, method, "audio", seed)),
+        seeds,
+    )
+    for row in rows:
+        row["method"] = method
+    if protocol != "fewshot" or test_library is not None:
         return rows[0]
     return {"method": method, "protocol": protocol, "sense": "audio", "seeds": seeds, "rows": rows}
 
