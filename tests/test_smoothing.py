@@ -28,12 +28,13 @@ def test_first_window_is_its_floored_evidence() -> None:
 
 
 def test_no_evidence_only_moves_belief_by_the_transition() -> None:
-    out = forward_step({"a": 1.0, "b": 0.0, "c": 0.0}, {}, stay=0.8, floor=0.1)
+    # kept with 0.7, else drawn afresh: 0.3/3 to each scene, itself included
+    out = forward_step({"a": 1.0, "b": 0.0, "c": 0.0}, {}, stay=0.7, floor=0.1)
     assert out == pytest.approx({"a": 0.8, "b": 0.1, "c": 0.1})
 
 
 def test_one_step_is_prior_times_evidence() -> None:
-    # prior a = 0.9·0.5 + 0.1·0.5 = 0.5 (two states); evidence a = 0.5·0.6 + 0.25 = 0.55,
+    # prior a = 0.9·0.5 + 0.1/2 = 0.5 (two states); evidence a = 0.5·0.6 + 0.25 = 0.55,
     # b = 0.5·0.4 + 0.25 = 0.45
     out = forward_step({"a": 0.5, "b": 0.5}, {"a": 0.6, "b": 0.4}, stay=0.9, floor=0.5)
     assert out == pytest.approx({"a": 0.55, "b": 0.45})
@@ -55,6 +56,12 @@ def test_a_real_change_shows_within_two_windows() -> None:
     second = smoother.update(STREET)
     assert decided(first) == "cafe"
     assert decided(second) == "street"
+
+
+def test_staying_is_never_less_likely_than_moving() -> None:
+    # a low stay with two scenes still keeps the belief where it was, if only a little
+    out = forward_step({"a": 1.0, "b": 0.0}, {}, stay=0.2, floor=0.1)
+    assert out["a"] > out["b"]
 
 
 def test_probabilities_sum_to_one() -> None:

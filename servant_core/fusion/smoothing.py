@@ -1,8 +1,10 @@
 """Stable live decisions: a forward filter over consecutive windows' per-scene probabilities.
 
 A place does not change every five seconds. The scene is treated as the hidden state of a hidden
-Markov model whose transition matrix keeps the scene with probability `stay` and moves to each
-other scene with probability (1 − stay)/(n − 1). Each window's probabilities are its evidence:
+Markov model whose transition matrix keeps the scene with probability `stay` and otherwise draws
+the next scene afresh, uniformly over the n known ones (itself included): T = stay·I +
+(1 − stay)/n. Staying is then never less likely than any one move, whatever n (with "move to each
+other scene with (1 − stay)/(n − 1)" a stay below 1/n would make the filter flip on purpose). Each window's probabilities are its evidence:
 floored at `floor`/n (mixed with a uniform distribution), so that a single confident but odd
 window can shift the belief only so far, while two or three windows that agree overturn it.
 
@@ -37,13 +39,9 @@ def forward_step(
         return {}
     if not belief:
         prior = dict.fromkeys(states, 1.0 / n)
-    elif n == 1:
-        prior = {states[0]: 1.0}
     else:
-        move = (1.0 - stay) / (n - 1)
         total = sum(belief.values())
-        # P(s_t = s) = stay·b(s) + move·(1 − b(s)): the rest of the mass, spread evenly
-        prior = {s: stay * belief.get(s, 0.0) + move * (total - belief.get(s, 0.0)) for s in states}
+        prior = {s: stay * belief.get(s, 0.0) + (1.0 - stay) * total / n for s in states}
     if scores:
         mass = sum(max(v, 0.0) for v in scores.values())
         evidence = {
