@@ -3,10 +3,11 @@
 A place does not change every five seconds. The scene is treated as the hidden state of a hidden
 Markov model whose transition matrix keeps the scene with probability `stay` and otherwise draws
 the next scene afresh, uniformly over the n known ones (itself included): T = stay·I +
-(1 − stay)/n. Staying is then never less likely than any one move, whatever n (with "move to each
-other scene with (1 − stay)/(n − 1)" a stay below 1/n would make the filter flip on purpose). Each window's probabilities are its evidence:
-floored at `floor`/n (mixed with a uniform distribution), so that a single confident but odd
-window can shift the belief only so far, while two or three windows that agree overturn it.
+(1 − stay)/n. Staying is then never less likely than any one move, whatever n (with "move to
+each other scene with (1 − stay)/(n − 1)" a stay below 1/n would flip on purpose). Each window's
+probabilities are its evidence: floored at `floor`/n (mixed with a uniform distribution), so
+that a single confident but odd window can shift the belief only so far, while two or three
+windows that agree overturn it.
 
 `update(scores)` runs one step of the forward pass and returns the filtered probabilities (the
 belief after this window), which sum to one. Decisions are then made on those instead of on the

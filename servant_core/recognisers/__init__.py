@@ -10,6 +10,7 @@ from servant_core.recognisers.bovw import BovwVisualRecogniser
 from servant_core.recognisers.codebook import CodebookAcousticRecogniser
 from servant_core.recognisers.kmeans_encoder import KMeansEncoderAcousticRecogniser
 from servant_core.recognisers.paper import PaperAcousticRecogniser, PaperVisualRecogniser
+from servant_core.recognisers.softbovw import SoftBovwVisualRecogniser
 
 ACOUSTIC_METHODS: dict[str, type[Recogniser]] = {
     "paper": PaperAcousticRecogniser,
@@ -19,6 +20,7 @@ ACOUSTIC_METHODS: dict[str, type[Recogniser]] = {
 VISUAL_METHODS: dict[str, type[Recogniser]] = {
     "paper": PaperVisualRecogniser,
     "bovw": BovwVisualRecogniser,
+    "softbovw": SoftBovwVisualRecogniser,
 }
 
 
