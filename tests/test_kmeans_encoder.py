@@ -62,7 +62,7 @@ def test_two_scenes_give_scikit_learns_probabilities(trained) -> None:
     model, scenes = trained
     X = model.featurize(np.concatenate([scenes["low"], scenes["mid"]]))
     two = KMeansEncoderAcousticRecogniser(**SMALL).fit(X, ["low"] * 6 + ["mid"] * 6)
-    reference = LogisticRegression(C=two.C, max_iter=3000).fit(
+    reference = LogisticRegression(C=two.C, class_weight="balanced", max_iter=3000).fit(
         two.train_descriptors_, two.train_scenes_
     )
     np.testing.assert_allclose(

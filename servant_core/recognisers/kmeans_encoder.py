@@ -95,10 +95,11 @@ class KMeansEncoderAcousticRecogniser:
         fmin: float = DEFAULT_FMIN,
         fmax: float = DEFAULT_FMAX,
         n_codewords: int = 64,
-        n_codebooks: int = 2,
-        C: float = 0.05,
-        augment: int = 2,
-        eq_strength: float = 0.3,
+        n_codebooks: int = 3,
+        C: float = 0.5,
+        augment: int = 8,
+        crops: int = 4,
+        eq_strength: float = 0.45,
         max_codebook_frames: int = 20000,
         reject_quantile: float = 0.95,
         reject_margin: float = 1.7,
@@ -114,6 +115,7 @@ class KMeansEncoderAcousticRecogniser:
         self.n_codebooks = n_codebooks
         self.C = C
         self.augment = augment
+        self.crops = crops
         self.eq_strength = eq_strength
         self.max_codebook_frames = max_codebook_frames
         self.reject_quantile = reject_quantile
@@ -132,6 +134,7 @@ class KMeansEncoderAcousticRecogniser:
             "n_codebooks": self.n_codebooks,
             "C": self.C,
             "augment": self.augment,
+            "crops": self.crops,
             "eq_strength": self.eq_strength,
             "max_codebook_frames": self.max_codebook_frames,
             "reject_quantile": self.reject_quantile,
@@ -167,23 +170,31 @@ class KMeansEncoderAcousticRecogniser:
                 for seed in seeds
             ]
         ).astype(np.float32)
-        D = self.describe(frames).astype(np.float64)
-        self.descriptor_mean_ = D.mean(axis=0)
+        D = np.vstack([self.describe(part) for part in self._crops(frames)]).astype(np.float64)
         # A codeword almost no training frame comes near has next to no spread; unfloored, a new
         # place that does come near it would sit thousands of spreads away on that one column.
         spread = D.std(axis=0)
+        self.descriptor_mean_ = D.mean(axis=0)
         self.descriptor_scale_ = np.maximum(spread, SCALE_FLOOR * np.median(spread) + 1e-12)
         self.train_descriptors_ = self._standardise(D)
-        self.train_scenes_ = np.tile(scenes_arr, len(views))
-        self.train_equalised_ = np.repeat(np.arange(len(views)) > 0, len(X))
+        copies = len(D) // len(X)
+        self.train_scenes_ = np.tile(scenes_arr, copies)
+        self.train_derived_ = np.arange(len(D)) >= len(X)
         self._fit_heads()
         return self
+
+    def _crops(self, frames: np.ndarray) -> list[np.ndarray]:
+        """The whole windows, then `crops` evenly spaced halves of them: with a window or two a
+        scene (a first teach session) the head still sees how a place varies within itself."""
+        half = frames.shape[1] // 2
+        starts = np.linspace(0, frames.shape[1] - half, self.crops).astype(int)
+        return [frames] + [frames[:, s : s + half] for s in starts]
 
     def _fit_heads(self) -> None:
         """The logistic head over every stored descriptor; the open set's centroids (one a
         scene, equal spreads) over the windows as heard, not their equalised copies."""
         self._fit_head()
-        heard = ~self.train_equalised_
+        heard = ~self.train_derived_
         self.novelty_head_ = SceneCentroids.fit(
             self.train_descriptors_[heard],
             self.train_scenes_[heard],
@@ -195,7 +206,8 @@ class KMeansEncoderAcousticRecogniser:
         )
 
     def _fit_head(self) -> None:
-        head = LogisticRegression(C=self.C, max_iter=3000)
+        # Scenes come with very different numbers of windows; each weighs the same.
+        head = LogisticRegression(C=self.C, class_weight="balanced", max_iter=3000)
         head.fit(self.train_descriptors_, self.train_scenes_)
         self.classes_ = [str(c) for c in head.classes_]
         coef, intercept = head.coef_, head.intercept_
@@ -213,7 +225,7 @@ class KMeansEncoderAcousticRecogniser:
         D = self.descriptors(X)
         self.train_descriptors_ = np.vstack([self.train_descriptors_, D])
         self.train_scenes_ = np.concatenate([self.train_scenes_, np.asarray(scenes, dtype=str)])
-        self.train_equalised_ = np.concatenate([self.train_equalised_, np.zeros(len(D), bool)])
+        self.train_derived_ = np.concatenate([self.train_derived_, np.zeros(len(D), bool)])
         self._fit_heads()
         return self
 
@@ -281,7 +293,7 @@ class KMeansEncoderAcousticRecogniser:
             "intercept": self.intercept_,
             "train_descriptors": self.train_descriptors_,
             "train_scenes": self.train_scenes_.astype(str),
-            "train_equalised": self.train_equalised_,
+            "train_derived": self.train_derived_,
             **{f"novelty_{k}": v for k, v in novelty_arrays.items()},
         }
         return header, arrays
@@ -299,7 +311,7 @@ class KMeansEncoderAcousticRecogniser:
         model.intercept_ = np.asarray(arrays["intercept"], dtype=np.float64)
         model.train_descriptors_ = np.asarray(arrays["train_descriptors"], dtype=np.float64)
         model.train_scenes_ = np.asarray(arrays["train_scenes"]).astype(str)
-        model.train_equalised_ = np.asarray(arrays["train_equalised"], dtype=bool)
+        model.train_derived_ = np.asarray(arrays["train_derived"], dtype=bool)
         prefixed = {k[len("novelty_") :]: v for k, v in arrays.items() if k.startswith("novelty_")}
         model.novelty_head_ = SceneCentroids.from_state(header["novelty"], prefixed)
         return model
