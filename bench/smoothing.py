@@ -40,8 +40,10 @@ from servant_core.fusion.smoothing import SceneSmoother  # noqa: E402
 from servant_core.library import SceneLibrary  # noqa: E402
 from servant_core.recognisers import make_audio_recogniser  # noqa: E402
 
-STAYS = (0.2, 0.3, 0.5, 0.7, 0.8, 0.9, 0.95)
+STAYS = (0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 0.8, 0.9, 0.95)
 FLOORS = (0.02, 0.05, 0.1, 0.2, 0.4, 0.6, 0.8)
+# for comparison: a setting that holds a single sure odd window (tests/test_smoothing.py)
+STICKY_STAY, STICKY_FLOOR = 0.95, 0.1
 SCENES_PER_STREAM = 5
 CHANGE_WINDOWS = 2
 
@@ -149,7 +151,7 @@ def choose_setting(
 def line(name: str, f: Figures) -> str:
     n = len(f.delays_s)
     return (
-        f"{name:<28} {f.flips_per_minute:>8.2f} {statistics.median(f.delays_s):>10.1f}"
+        f"{name:<36} {f.flips_per_minute:>8.2f} {statistics.median(f.delays_s):>10.1f}"
         f" {statistics.mean(f.delays_s):>8.1f} {(n - f.late) / n:>11.2f} {f.never:>6d}"
     )
 
@@ -200,11 +202,18 @@ def main() -> None:
     )
     print(f"chosen on the training part: stay {stay:g}, floor {floor:g}")
     print(
-        f"{'decisions':<28} {'wrong/min':>8} {'median s':>10} {'mean s':>8}"
+        f"{'decisions':<36} {'wrong/min':>8} {'median s':>10} {'mean s':>8}"
         f" {'within 2 w.':>11} {'never':>6}"
     )
     print(line("raw (argmax per window)", raw))
-    print(line(f"smoothed (stay {stay:g})", smooth))
+    print(line(f"smoothed (stay {stay:g}, floor {floor:g})", smooth))
+    sticky = SceneSmoother(STICKY_STAY, STICKY_FLOOR)
+    print(
+        line(
+            f"stickier (stay {STICKY_STAY:g}, floor {STICKY_FLOOR:g})",
+            measure(test, columns, sticky, window_s),
+        )
+    )
 
 
 if __name__ == "__main__":

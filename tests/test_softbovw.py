@@ -10,6 +10,7 @@ from servant_core.recognisers import UNKNOWN
 from servant_core.recognisers.softbovw import (
     SoftBovwVisualRecogniser,
     mirrored,
+    one_standard_error_choice,
     pooled,
     region_masks,
     triangle_activations,
@@ -36,6 +37,13 @@ def test_regions_cut_the_grid_and_pooling_averages_them() -> None:
     activations = np.zeros((1, 16, 2))
     activations[0, 0, 1] = 4.0  # one block of the top-left quarter uses word 1
     np.testing.assert_allclose(pooled(activations, masks)[0], [0, 0.25, 0, 1, 0, 0, 0, 0, 0, 0])
+
+
+def test_the_simplest_setting_within_one_standard_error_wins() -> None:
+    # best: setting 2, mean 0.6, folds 0.5/0.7 → standard error 0.1414/√2 = 0.1
+    scores = np.array([[0.40, 0.42], [0.52, 0.50], [0.50, 0.70]])
+    assert one_standard_error_choice(scores) == 1  # 0.51 ≥ 0.5; 0.41 is not
+    assert one_standard_error_choice(np.array([[0.3, 0.3], [0.6, 0.6]])) == 1
 
 
 def small_model(**params) -> SoftBovwVisualRecogniser:

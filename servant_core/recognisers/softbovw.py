@@ -11,9 +11,9 @@
    over the whole picture and over a grid of regions (a spatial pyramid: the sky is up).
 4. A multinomial logistic regression over the standardised encodings and the square-rooted HSV
    histogram gives calibrated probabilities; its regularisation is chosen by stratified
-   cross-validation inside the training pictures. Each training picture is also learned from
-   as its mirror image (a café seen from its other side is still a café), which is computed
-   from the block descriptors themselves (`mirrored`), so no picture is kept.
+   cross-validation inside the training pictures (one-standard-error rule). Each training
+   picture is also learned from as its mirror image (a café seen from its other side is still a
+   café), computed from the block descriptors themselves (`mirrored`): no picture is kept.
 5. Open set: one centroid per scene in the standardised encoding space, with its spread
    (`SceneCentroids`); a picture farther than the training pictures' own distances (times a
    margin) from every centroid is "unknown place".
@@ -71,6 +71,15 @@ def mirrored(gradients: np.ndarray, colours: np.ndarray) -> tuple[np.ndarray, np
     g = gradients.reshape(n, side, side, 4, width // 4)[:, :, ::-1][:, :, :, swap][..., ::-1]
     c = colours.reshape(n, side, side, 4, -1)[:, :, ::-1][:, :, :, swap]
     return g.reshape(gradients.shape), c.reshape(colours.shape)
+
+
+def one_standard_error_choice(scores: np.ndarray) -> int:
+    """Of (settings, folds) scores, settings ordered simplest first: the first setting whose mean
+    is within one standard error (of the best setting's folds) of the best mean."""
+    means = scores.mean(axis=1)
+    best = int(np.argmax(means))
+    error = scores[best].std(ddof=1) / np.sqrt(scores.shape[1])
+    return int(np.flatnonzero(means >= means[best] - error)[0])
 
 
 def region_masks(n_blocks: int, grids: Sequence[int]) -> np.ndarray:
@@ -240,26 +249,25 @@ class SoftBovwVisualRecogniser:
         return LogisticRegression(C=C, class_weight="balanced", max_iter=2000)
 
     def _choose_C(self, D: np.ndarray, mirrors: np.ndarray, labels: np.ndarray) -> float:
-        """The regularisation of best mean balanced accuracy over stratified folds of the
-        training pictures (a picture and its mirror always on the same side); the smallest C,
-        the most regularised, when there are too few pictures to fold."""
+        """The regularisation chosen by stratified folds of the training pictures (a picture and
+        its mirror always on the same side): the smallest C (the most regularised) whose mean
+        balanced accuracy is within one standard error of the best (Breiman's one-standard-error
+        rule: new pictures come from places the folds never show, where the simpler head holds
+        up better). The smallest C of the grid when there are too few pictures to fold."""
         smallest = int(min(np.unique(labels, return_counts=True)[1]))
         folds = min(self.cv_folds, smallest)
         if folds < 2:
             return C_GRID[0]
         cv = StratifiedKFold(folds, shuffle=True, random_state=self.random_state)
-        means = []
-        for C in C_GRID:
-            accuracies = []
-            for train, test in cv.split(D, labels):
-                mirrored_train = train[train < len(mirrors)]
-                head = self._head(C).fit(
-                    np.vstack([D[train], mirrors[mirrored_train]]),
-                    np.concatenate([labels[train], labels[mirrored_train]]),
-                )
-                accuracies.append(balanced_accuracy_score(labels[test], head.predict(D[test])))
-            means.append(np.mean(accuracies))
-        return float(C_GRID[int(np.argmax(means))])
+        scores = np.zeros((len(C_GRID), folds))
+        for k, (train, test) in enumerate(cv.split(D, labels)):
+            mirrored_train = train[train < len(mirrors)]
+            X = np.vstack([D[train], mirrors[mirrored_train]])
+            y = np.concatenate([labels[train], labels[mirrored_train]])
+            for i, C in enumerate(C_GRID):
+                head = self._head(C).fit(X, y)
+                scores[i, k] = balanced_accuracy_score(labels[test], head.predict(D[test]))
+        return float(C_GRID[one_standard_error_choice(scores)])
 
     def _fit_head(self) -> None:
         self.head_ = self._head(self.C_).fit(self.train_rows_, self.train_scenes_)
