@@ -170,7 +170,8 @@ class KMeansEncoderAcousticRecogniser:
                 for seed in seeds
             ]
         ).astype(np.float32)
-        D = np.vstack([self.describe(part) for part in self._crops(frames)]).astype(np.float64)
+        parts = [frames, *self._crops(X)]
+        D = np.vstack([self.describe(part) for part in parts]).astype(np.float64)
         # A codeword almost no training frame comes near has next to no spread; unfloored, a new
         # place that does come near it would sit thousands of spreads away on that one column.
         spread = D.std(axis=0)
@@ -184,11 +185,11 @@ class KMeansEncoderAcousticRecogniser:
         return self
 
     def _crops(self, frames: np.ndarray) -> list[np.ndarray]:
-        """The whole windows, then `crops` evenly spaced halves of them: with a window or two a
-        scene (a first teach session) the head still sees how a place varies within itself."""
+        """`crops` evenly spaced halves of the windows: with a window or two a scene (a first
+        teach session) the head still sees how a place varies within itself."""
         half = frames.shape[1] // 2
         starts = np.linspace(0, frames.shape[1] - half, self.crops).astype(int)
-        return [frames] + [frames[:, s : s + half] for s in starts]
+        return [frames[:, s : s + half] for s in starts]
 
     def _fit_heads(self) -> None:
         """The logistic head over every stored descriptor; the open set's centroids (one a
@@ -291,7 +292,7 @@ class KMeansEncoderAcousticRecogniser:
             "descriptor_scale": self.descriptor_scale_,
             "coef": self.coef_,
             "intercept": self.intercept_,
-            "train_descriptors": self.train_descriptors_,
+            "train_descriptors": self.train_descriptors_.astype(np.float32),
             "train_scenes": self.train_scenes_.astype(str),
             "train_derived": self.train_derived_,
             **{f"novelty_{k}": v for k, v in novelty_arrays.items()},
