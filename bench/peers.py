@@ -16,8 +16,9 @@ features in a last column that the peer strips before fitting):
   (60 Hz–10.5 kHz, `features.logmel`), Δ their frame-to-frame gradient;
 - log-mel(64) mean/std + logistic regression, over the same band.
 
-pyAudioAnalysis is not among them: it drags in plotting, HMM and MP3-tagging packages that do not
-install cleanly here; it stays out rather than become a dependency.
+pyAudioAnalysis is not among them: its 0.3.14 sdist declares no dependencies, yet its feature
+modules import matplotlib, tqdm, eyeD3 and pydub (and `aifc`, gone in Python 3.13) at import
+time; it is no clean bench-only extra, so it stays out.
 
 Servant's rows: `codebook` and `kmeans-encoder` (`paper` is far too slow for twenty-odd folds).
 The picture rows come from `bench/picture_peers.py` (`picture_rows`) when it is present.
