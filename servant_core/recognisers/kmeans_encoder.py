@@ -97,7 +97,7 @@ class KMeansEncoderAcousticRecogniser:
         n_codewords: int = 64,
         n_codebooks: int = 3,
         C: float = 0.5,
-        augment: int = 8,
+        augment: int = 2,
         crops: int = 4,
         eq_strength: float = 0.45,
         max_codebook_frames: int = 20000,
