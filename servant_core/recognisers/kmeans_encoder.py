@@ -18,8 +18,9 @@
    spread (`SceneCentroids`); a window farther than the rejection distance from every centroid
    is `UNKNOWN`.
 
-Every parameter's default was chosen by cross-validation grouped by recording inside the
-training library (`bench/kmeans_encoder_search.py`).
+`C` and `augment` are the choice of cross-validation grouped by recording inside the training
+library (`bench/kmeans_encoder_search.py`); the other defaults come from earlier rounds of that
+kind (README, issue 11 section).
 """
 
 from __future__ import annotations
