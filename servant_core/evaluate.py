@@ -191,7 +191,7 @@ def audio_plans(
     return [AudioPlan(protocol, rows, [~row for row in rows])]
 
 
-def _seeded(
+def seeded_params(
     cls_params: dict[str, Any], method: str, sense: str, seed: int | None
 ) -> dict[str, Any]:
     """`cls_params` with `random_state=seed` when the method takes one (seed None: as given)."""
@@ -336,7 +336,7 @@ def evaluate_audio(
         wf,
         names,
         plans,
-        lambda seed: make_audio_recogniser(method, **_seeded(params, method, "audio", seed)),
+        lambda seed: make_audio_recogniser(method, **seeded_params(params, method, "audio", seed)),
         seeds,
     )
     for row in rows:
@@ -384,7 +384,7 @@ def evaluate_image(
         protocol = "train-test"
 
     def run(seed: int | None) -> dict[str, Any]:
-        fitted = make_recogniser("image", method, **_seeded(params, method, "image", seed))
+        fitted = make_recogniser("image", method, **seeded_params(params, method, "image", seed))
         fitted.fit(X_train, y_train)
         preds = Predictions([], [], [])
         preds.extend(fitted, X_test, y_test)

@@ -11,7 +11,7 @@ import soundfile as sf
 from servant_core.cli import main
 from servant_core.demo.audio_synth import DEMO_RATE
 from servant_core.demo.scenes import synth_picture, synth_window
-from servant_core.evaluate import _seeded, fewshot_split, temporal_split
+from servant_core.evaluate import fewshot_split, seeded_params, temporal_split
 
 SCENES = ("coffee", "gym", "street")
 
@@ -128,8 +128,9 @@ def test_eval_audio_seeds_report_mean_spread_and_each_seed(libraries, capsys):
 
 
 def test_seeds_reach_the_methods_random_state():
-    assert _seeded({"rate": 8000}, "codebook", "audio", 3) == {"rate": 8000, "random_state": 3}
-    assert _seeded({"rate": 8000}, "codebook", "audio", None) == {"rate": 8000}
+    seeded = seeded_params({"rate": 8000}, "codebook", "audio", 3)
+    assert seeded == {"rate": 8000, "random_state": 3}
+    assert seeded_params({"rate": 8000}, "codebook", "audio", None) == {"rate": 8000}
 
 
 def test_eval_image_seeds(libraries, capsys):
