@@ -56,6 +56,7 @@ from servant_core.evaluate import (  # noqa: E402
     AudioPlan,
     audio_plans,
     evaluate_windows,
+    seeded_params,
 )
 from servant_core.features.logmel import log_mel_frames  # noqa: E402
 from servant_core.library import SceneLibrary, WindowFeatures, iter_recording_windows  # noqa: E402
@@ -206,7 +207,7 @@ def audio_rows(data_root: Path, seeds: int) -> list[dict[str, Any]]:
             make: Callable[[int | None], Any] = PEERS[method][1]
         else:
             make = lambda seed, m=method: make_audio_recogniser(  # noqa: E731
-                m, rate=RATE, **({} if seed is None else {"random_state": seed})
+                m, **seeded_params({"rate": RATE}, m, "audio", seed)
             )
         for column, keep, plans in protocol_plans(wf):
             start = time.perf_counter()
