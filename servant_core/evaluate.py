@@ -1,16 +1,21 @@
 """Evaluation protocols (DESIGN.md) and the paper's tables.
 
 Audio: `temporal` — the first 60 % of each recording's windows train, the rest test;
-`recording` — leave one recording out, train on the rest, pool the predictions.
+`recording` — leave one recording out, train on the rest, pool the predictions;
+`fewshot` — the first k windows of each recording train (teach mode: a few presses of the teach
+key), the temporal test part tests; `train-test` — one library trains, another tests.
+Every protocol can be repeated over random states (`over_seeds`): mean and spread.
 Images: a train library and a test library, or one library split by file order per scene.
 Fusion: test windows paired with test pictures of the same scene, run through a fusion policy.
 """
 
 from __future__ import annotations
 
+import inspect
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -33,9 +38,11 @@ from servant_core.recognisers import (
     Recogniser,
     make_audio_recogniser,
     make_recogniser,
+    methods_for,
 )
 
-PROTOCOLS = ("temporal", "recording")
+PROTOCOLS = ("temporal", "recording", "fewshot")
+DEFAULT_SHOTS = (1, 2, 3, 5, 10)
 TRAIN_FRACTION = 0.6
 IMAGE_TRAIN_FRACTION = 0.7
 LOG_EPS = 1e-15
@@ -149,6 +156,153 @@ def featurize_library_audio(
     )
 
 
+def fewshot_split(
+    recording: np.ndarray, position: np.ndarray, shots: int, fraction: float = TRAIN_FRACTION
+) -> np.ndarray:
+    """Boolean train mask of teach mode's reality: the first `shots` windows of each recording,
+    never beyond its temporal train part (so the temporal test part stays unseen)."""
+    return temporal_split(recording, position, fraction) & (position < shots)
+
+
+@dataclass
+class AudioPlan:
+    """One scored row: a model per fold fitted on `folds[i]` (train mask over the windows) and
+    tested on `tests[i]`; `shots` for a fewshot row."""
+
+    protocol: str
+    folds: list[np.ndarray]
+    tests: list[np.ndarray]
+    shots: int | None = None
+
+
+def audio_plans(
+    wf: WindowFeatures, protocol: str, shots: Sequence[int] = DEFAULT_SHOTS
+) -> list[AudioPlan]:
+    """The folds of `protocol` over `wf`'s windows: `temporal` one fold, `recording` one per
+    recording (tested on it alone), `fewshot` one row per number of shots (each tested on the
+    temporal test part)."""
+    temporal = temporal_split(wf.recording, wf.position)
+    if protocol == "temporal":
+        return [AudioPlan(protocol, [temporal], [~temporal])]
+    if protocol == "fewshot":
+        return [
+            AudioPlan(protocol, [fewshot_split(wf.recording, wf.position, k)], [~temporal], k)
+            for k in shots
+        ]
+    rows = [wf.recording != r for r in np.unique(wf.recording)]
+    return [AudioPlan(protocol, rows, [~row for row in rows])]
+
+
+def seeded_params(
+    cls_params: dict[str, Any], method: str, sense: str, seed: int | None
+) -> dict[str, Any]:
+    """`cls_params` with `random_state=seed` when the method takes one (seed None: as given)."""
+    if seed is None:
+        return cls_params
+    init = inspect.signature(methods_for(sense)[method].__init__).parameters
+    return {**cls_params, "random_state": seed} if "random_state" in init else cls_params
+
+
+def _evaluate_folds(
+    wf: WindowFeatures,
+    plan: AudioPlan,
+    make_model: Callable[[], Recogniser],
+    names: Sequence[str],
+) -> dict[str, Any]:
+    """Fit one model per fold (train mask), predict its test mask, pool and score."""
+    preds = Predictions([], [], [])
+    tested: list[np.ndarray] = []  # the recording of each test window, in prediction order
+    skipped: list[str] = []
+    n_train = 0
+    for train, test in zip(plan.folds, plan.tests, strict=True):
+        try:
+            model = make_model().fit(wf.features[train], wf.scenes[train])
+        except ServantError as error:
+            if len(plan.folds) == 1:
+                raise
+            left_out = np.unique(wf.recording[test])
+            skipped.append(f"{', '.join(Path(names[r]).name for r in left_out)}: {error}")
+            continue
+        preds.extend(model, wf.features[test], wf.scenes[test])
+        tested.append(wf.recording[test])
+        n_train += int(train.sum())
+    result = scores(preds, sorted(set(wf.scenes.tolist())))
+    result["per_recording"] = per_recording(preds, np.concatenate(tested), names)
+    result.update(n_train=n_train, skipped_folds=skipped)
+    return result
+
+
+def evaluate_windows(
+    wf: WindowFeatures,
+    names: Sequence[str],
+    plans: Sequence[AudioPlan],
+    make_model: Callable[[int | None], Recogniser],
+    seeds: int = 1,
+) -> list[dict[str, Any]]:
+    """One scored row per plan; `make_model(seed)` gives a fresh model for a random state
+    (None: the method's own). Benchmarks score other methods through this same path."""
+    rows = []
+    for plan in plans:
+
+        def run(seed: int | None, plan: AudioPlan = plan) -> dict[str, Any]:
+            return _evaluate_folds(wf, plan, lambda: make_model(seed), names)
+
+        row = over_seeds(run, seeds)
+        row.update(protocol=plan.protocol, sense="audio", n_recordings=len(np.unique(wf.recording)))
+        if plan.shots is not None:
+            row["shots"] = plan.shots
+        rows.append(row)
+    return rows
+
+
+SEED_METRICS = ("accuracy", "balanced_accuracy", "log_loss", "unknown_rate")
+
+
+def over_seeds(run: Callable[[int | None], dict[str, Any]], seeds: int) -> dict[str, Any]:
+    """`run(None)` once (the method's own random state) when `seeds` is 1; otherwise
+    `run(0..seeds-1)`, and the result holds the mean of each figure, its spread (std, min, max)
+    and every seed's own figures under `per_seed`."""
+    if seeds < 1:
+        raise ServantError(f"--seeds must be at least 1, not {seeds}")
+    if seeds == 1:
+        return run(None)
+    runs = [run(seed) for seed in range(seeds)]
+    result = dict(runs[0])
+    # What one seed heard recording by recording does not average; each seed's figures are kept.
+    for key in ("per_recording", "confusion"):
+        result.pop(key, None)
+    result["per_class"] = {
+        scene: float(np.mean([r["per_class"][scene] for r in runs]))
+        for scene in result["per_class"]
+    }
+    result["spread"] = {}
+    for key in SEED_METRICS:
+        values = np.array([r[key] for r in runs])
+        result[key] = float(values.mean())
+        result["spread"][key] = {
+            "std": float(values.std()),
+            "min": float(values.min()),
+            "max": float(values.max()),
+        }
+    result["seeds"] = seeds
+    result["per_seed"] = [
+        {"random_state": seed, **{key: r[key] for key in (*SEED_METRICS, "per_class")}}
+        for seed, r in enumerate(runs)
+    ]
+    return result
+
+
+def _joined(train: WindowFeatures, test: WindowFeatures) -> WindowFeatures:
+    """One set of windows: `test`'s recordings numbered after `train`'s."""
+    return WindowFeatures(
+        np.concatenate([train.features, test.features]),
+        np.concatenate([train.scenes, test.scenes]),
+        np.concatenate([train.recording, test.recording + len(train.recordings)]),
+        np.concatenate([train.position, test.position]),
+        [*train.recordings, *test.recordings],
+    )
+
+
 def evaluate_audio(
     library: SceneLibrary,
     method: str = "paper",
@@ -156,50 +310,43 @@ def evaluate_audio(
     params: dict[str, Any] | None = None,
     on_error: Callable[[ServantError], None] | None = None,
     on_progress: Callable[[int, int], None] | None = None,
+    *,
+    test_library: SceneLibrary | None = None,
+    shots: Sequence[int] = DEFAULT_SHOTS,
+    seeds: int = 1,
 ) -> dict[str, Any]:
+    """Score `method` on `library`'s windows under `protocol`; with `test_library`, train on all
+    of `library` and test on all of `test_library` (protocol `train-test`). `fewshot` gives one
+    row per number of `shots` under `rows`. With `seeds` > 1 every figure is a mean over random
+    states 0..seeds-1 (see `over_seeds`)."""
     if protocol not in PROTOCOLS:
-        raise ServantError(f"unknown protocol {protocol!r}; choose temporal or recording")
+        raise ServantError(f"unknown protocol {protocol!r}; choose {', '.join(PROTOCOLS)}")
+    if protocol == "fewshot" and (not shots or min(shots) < 1):
+        raise ServantError("--shots needs whole numbers of windows, each at least 1 (e.g. 1,3,10)")
     params = params or {}
     probe = make_audio_recogniser(method, **params)
     wf = featurize_library_audio(library, probe, on_error, on_progress)
-    preds = Predictions([], [], [])
-    tested: list[np.ndarray] = []  # the recording of each test window, in prediction order
-    skipped: list[str] = []
-    if protocol == "temporal":
-        train = temporal_split(wf.recording, wf.position)
-        model = make_audio_recogniser(method, **params).fit(wf.features[train], wf.scenes[train])
-        preds.extend(model, wf.features[~train], wf.scenes[~train])
-        tested.append(wf.recording[~train])
-        n_train = int(train.sum())
+    names = [str(r.path.relative_to(library.root)) for r in wf.recordings]
+    if test_library is not None:
+        test_wf = featurize_library_audio(test_library, probe, on_error, on_progress)
+        names += [str(r.path.relative_to(test_library.root)) for r in test_wf.recordings]
+        train = np.arange(len(wf.scenes) + len(test_wf.scenes)) < len(wf.scenes)
+        wf = _joined(wf, test_wf)
+        plans = [AudioPlan("train-test", [train], [~train])]
     else:
-        n_train = 0
-        for r in np.unique(wf.recording):
-            test = wf.recording == r
-            try:
-                model = make_audio_recogniser(method, **params).fit(
-                    wf.features[~test], wf.scenes[~test]
-                )
-            except ServantError as error:
-                skipped.append(f"{wf.recordings[r].path.name}: {error}")
-                continue
-            preds.extend(model, wf.features[test], wf.scenes[test])
-            tested.append(wf.recording[test])
-            n_train += int((~test).sum())
-    result = scores(preds, sorted(set(wf.scenes.tolist())))
-    result["per_recording"] = per_recording(
-        preds,
-        np.concatenate(tested),
-        [str(r.path.relative_to(library.root)) for r in wf.recordings],
+        plans = audio_plans(wf, protocol, shots)
+    rows = evaluate_windows(
+        wf,
+        names,
+        plans,
+        lambda seed: make_audio_recogniser(method, **seeded_params(params, method, "audio", seed)),
+        seeds,
     )
-    result.update(
-        method=method,
-        protocol=protocol,
-        sense="audio",
-        n_train=n_train,
-        n_recordings=len(np.unique(wf.recording)),
-        skipped_folds=skipped,
-    )
-    return result
+    for row in rows:
+        row["method"] = method
+    if protocol != "fewshot" or test_library is not None:
+        return rows[0]
+    return {"method": method, "protocol": protocol, "sense": "audio", "seeds": seeds, "rows": rows}
 
 
 def _pictures_and_features(
@@ -218,9 +365,12 @@ def evaluate_image(
     split: float = IMAGE_TRAIN_FRACTION,
     params: dict[str, Any] | None = None,
     on_error: Callable[[ServantError], None] | None = None,
+    seeds: int = 1,
 ) -> dict[str, Any]:
     """Train on `train_library`'s pictures and test on `test_library`'s; with no test library,
-    split each scene's pictures by file order (the first `split` train)."""
+    split each scene's pictures by file order (the first `split` train). With `seeds` > 1 the
+    figures are means over random states 0..seeds-1 (see `over_seeds`); pictures are featurized
+    once (featurizing depends on the parameters only)."""
     params = params or {}
     model = make_recogniser("image", method, **params)
     if test_library is None:
@@ -235,10 +385,15 @@ def evaluate_image(
         y_train = [p.scene for p in kept_train]
         y_test = [p.scene for p in kept_test]
         protocol = "train-test"
-    model.fit(X_train, y_train)
-    preds = Predictions([], [], [])
-    preds.extend(model, X_test, y_test)
-    result = scores(preds, sorted(set(y_train) | set(y_test)))
+
+    def run(seed: int | None) -> dict[str, Any]:
+        fitted = make_recogniser("image", method, **seeded_params(params, method, "image", seed))
+        fitted.fit(X_train, y_train)
+        preds = Predictions([], [], [])
+        preds.extend(fitted, X_test, y_test)
+        return scores(preds, sorted(set(y_train) | set(y_test)))
+
+    result = over_seeds(run, seeds)
     result.update(method=method, protocol=protocol, sense="image", n_train=len(y_train))
     return result
 

@@ -13,7 +13,9 @@ from servant_core.cli import emit, one_line, options
 from servant_core.engine import FRESH_METHODS, decision_unit
 from servant_core.errors import ServantError
 from servant_core.evaluate import (
+    DEFAULT_SHOTS,
     IMAGE_TRAIN_FRACTION,
+    PROTOCOLS,
     evaluate_audio,
     evaluate_fusion,
     evaluate_image,
@@ -66,19 +68,34 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     evaluate = subparsers.add_parser("eval", help="evaluate a method on a scene library")
     senses = evaluate.add_subparsers(dest="sense", metavar="SENSE", required=True)
-    audio = senses.add_parser("audio", help="acoustic recognition: temporal or recording protocol")
-    audio.add_argument("root", type=Path, help="scene library: ROOT/<scene>/<recordings>")
+    audio = senses.add_parser(
+        "audio", help="acoustic recognition: temporal, recording or fewshot protocol"
+    )
+    audio.add_argument("root", type=Path, help="training recordings (and test, without --test)")
     audio.add_argument(
         "--protocol",
-        choices=["temporal", "recording"],
+        choices=list(PROTOCOLS),
         default="temporal",
-        help="temporal: the first 60%% of each recording's windows train, the rest test; "
-        "recording: leave each recording out in turn",
+        help="temporal: the first 60%% of each recording trains; recording: leave one recording "
+        "out; fewshot: the first k windows of each recording train",
+    )
+    audio.add_argument(
+        "--test",
+        type=Path,
+        help="test recordings from another library: train on all of ROOT, test on all of TEST",
+    )
+    audio.add_argument(
+        "--shots",
+        type=_shots,
+        default=DEFAULT_SHOTS,
+        help="fewshot: comma-separated windows per recording that train "
+        f"(default: {','.join(map(str, DEFAULT_SHOTS))})",
     )
     audio.add_argument(
         "--method", choices=sorted(ACOUSTIC_METHODS), default="paper", help="acoustic method"
     )
     audio.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
+    _seeds_option(audio)
     _audio_options(audio)
     _json_option(audio)
     audio.set_defaults(handler=cmd_eval_audio)
@@ -97,6 +114,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--method", choices=sorted(VISUAL_METHODS), default="paper", help="visual method"
     )
     image.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
+    _seeds_option(image)
     _json_option(image)
     image.set_defaults(handler=cmd_eval_image)
     fusion = senses.add_parser("fusion", help="fused decisions over paired windows and pictures")
@@ -137,6 +155,28 @@ def _method_options(parser: argparse.ArgumentParser, paper: bool = False) -> Non
         default="paper" if paper else FRESH_METHODS["image"],
         help="visual method (paper: the paper's dominant colours)",
     )
+
+
+def _seeds_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--seeds",
+        type=options.bounded_int(1, 100),
+        default=1,
+        help="repeat over random states 0..N-1 and report mean and spread (default: %(default)s, "
+        "the method's own random state)",
+    )
+
+
+def _shots(text: str) -> tuple[int, ...]:
+    try:
+        shots = tuple(int(part) for part in text.split(",") if part.strip())
+    except ValueError:
+        shots = ()
+    if not shots or min(shots) < 1:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: give whole numbers of windows, each at least 1 (e.g. 1,3,10)"
+        )
+    return shots
 
 
 def _audio_options(parser: argparse.ArgumentParser) -> None:
@@ -336,14 +376,24 @@ def _role(model: dict[str, Recogniser], role: str, path: Path) -> Recogniser:
     return model[role]
 
 
+def _figure(result: dict[str, Any], key: str) -> str:
+    """`0.912`, or over seeds `0.912 (std 0.004, 0.905-0.918)`."""
+    text = f"{result[key]:.3f}"
+    spread = result.get("spread", {}).get(key)
+    if spread:
+        text += f" (std {spread['std']:.3f}, {spread['min']:.3f}-{spread['max']:.3f})"
+    return text
+
+
 def _format_scores(result: dict[str, Any]) -> str:
+    seeds = f" seeds={result['seeds']}" if "seeds" in result else ""
     lines = [
         f"{result['sense']} method={result['method']} protocol={result['protocol']} "
-        f"n_test={result['n_test']}",
-        f"accuracy           {result['accuracy']:.3f}",
-        f"balanced accuracy  {result['balanced_accuracy']:.3f}",
-        f"log loss           {result['log_loss']:.3f}",
-        f"unknown rate       {result['unknown_rate']:.3f}",
+        f"n_test={result['n_test']}{seeds}",
+        f"accuracy           {_figure(result, 'accuracy')}",
+        f"balanced accuracy  {_figure(result, 'balanced_accuracy')}",
+        f"log loss           {_figure(result, 'log_loss')}",
+        f"unknown rate       {_figure(result, 'unknown_rate')}",
         "recall per scene:",
     ]
     lines += [f"  {scene:<14} {recall:.3f}" for scene, recall in result["per_class"].items()]
@@ -358,10 +408,26 @@ def _format_scores(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _format_fewshot(result: dict[str, Any]) -> str:
+    """One line per number of shots."""
+    lines = [f"audio method={result['method']} protocol=fewshot"]
+    lines += [
+        f"k={row['shots']:<3} n_train={row['n_train']:<4} n_test={row['n_test']:<4} "
+        f"balanced accuracy {_figure(row, 'balanced_accuracy')}  log loss {row['log_loss']:.3f}"
+        for row in result["rows"]
+    ]
+    return "\n".join(lines)
+
+
 def cmd_eval_audio(args: argparse.Namespace) -> int:
+    if args.test is not None and args.protocol != "temporal":
+        raise ServantError(
+            "--test trains on all of ROOT and tests on all of TEST; leave out --protocol"
+        )
     library = _library(args.root, args.scenes)
     if args.protocol == "recording":
         _check_recording_protocol(library)
+    test = _library(args.test, args.scenes) if args.test else None
     result = evaluate_audio(
         library,
         args.method,
@@ -369,8 +435,12 @@ def cmd_eval_audio(args: argparse.Namespace) -> int:
         _audio_params(args),
         _warn,
         Progress("listening to recordings"),
+        test_library=test,
+        shots=args.shots,
+        seeds=args.seeds,
     )
-    emit(args, result, _format_scores(result))
+    text = _format_fewshot(result) if "rows" in result else _format_scores(result)
+    emit(args, result, text)
     return 0
 
 
@@ -390,7 +460,12 @@ def _check_recording_protocol(library: SceneLibrary) -> None:
 def cmd_eval_image(args: argparse.Namespace) -> int:
     test = _library(args.test, args.scenes) if args.test else None
     result = evaluate_image(
-        _library(args.root, args.scenes), test, args.method, args.split, on_error=_warn
+        _library(args.root, args.scenes),
+        test,
+        args.method,
+        args.split,
+        on_error=_warn,
+        seeds=args.seeds,
     )
     emit(args, result, _format_scores(result))
     return 0

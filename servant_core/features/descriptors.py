@@ -9,10 +9,14 @@ every 2×2 block of cells (overlapping, one cell apart) is described by:
   lighting contrast cancels);
 - its colour: the block's mean CIE L*a*b* colour (L in 0–100, a and b about ±100).
 
-These are what the `bovw` method's K-Means codebooks are learned from.
+These are what the `bovw` and `softbovw` methods' K-Means codebooks are learned from
+(`softbovw` keeps the colour of each of the block's four cells, a small colour layout). Beside
+them, a whole-picture hue × saturation × value histogram (`hsv_histogram`).
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import cv2
 import numpy as np
@@ -20,6 +24,7 @@ import numpy as np
 DEFAULT_SIZE = 128
 DEFAULT_CELL = 8
 DEFAULT_BINS = 9
+DEFAULT_HSV_BINS = (8, 4, 4)
 
 
 def square_thumbnail(image_bgr: np.ndarray, size: int = DEFAULT_SIZE) -> np.ndarray:
@@ -45,16 +50,15 @@ def blocks(cells: np.ndarray) -> np.ndarray:
     return np.concatenate([cells[:-1, :-1], cells[:-1, 1:], cells[1:, :-1], cells[1:, 1:]], axis=-1)
 
 
-def dense_descriptors(
+def block_descriptors(
     image_bgr: np.ndarray,
     size: int = DEFAULT_SIZE,
     cell: int = DEFAULT_CELL,
     n_bins: int = DEFAULT_BINS,
-) -> np.ndarray:
-    """(blocks, 4·n_bins + 3) float32: unit-length orientation blocks, then mean L*a*b* colour.
-
-    Blocks are in row-major grid order, so a block's index gives its place in the picture.
-    """
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per overlapping 2×2 block of cells, in row-major grid order (a block's index gives its
+    place in the picture): (blocks, 4·n_bins) unit-length orientation histograms of its cells,
+    and (blocks, 12) the mean L*a*b* colour of each of its four cells."""
     thumb = square_thumbnail(image_bgr, size)
     grey = cv2.cvtColor(thumb, cv2.COLOR_BGR2GRAY).astype(np.float32)
     gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=1)
@@ -66,7 +70,30 @@ def dense_descriptors(
     gradient_blocks = blocks(cell_sums(votes, cell))
     gradient_blocks /= np.linalg.norm(gradient_blocks, axis=-1, keepdims=True) + 1e-6
     lab = cv2.cvtColor(thumb.astype(np.float32) / 255.0, cv2.COLOR_BGR2Lab)
-    colour_cells = cell_sums(lab, cell) / (cell * cell)
-    colour_blocks = blocks(colour_cells).reshape(*colour_cells[1:, 1:].shape[:2], 4, 3).mean(axis=2)
-    out = np.concatenate([gradient_blocks, colour_blocks], axis=-1)
-    return out.reshape(-1, out.shape[-1]).astype(np.float32)
+    colour_blocks = blocks(cell_sums(lab, cell) / (cell * cell))
+    return (
+        gradient_blocks.reshape(-1, gradient_blocks.shape[-1]).astype(np.float32),
+        colour_blocks.reshape(-1, colour_blocks.shape[-1]).astype(np.float32),
+    )
+
+
+def dense_descriptors(
+    image_bgr: np.ndarray,
+    size: int = DEFAULT_SIZE,
+    cell: int = DEFAULT_CELL,
+    n_bins: int = DEFAULT_BINS,
+) -> np.ndarray:
+    """(blocks, 4·n_bins + 3) float32: unit-length orientation blocks, then mean L*a*b* colour.
+
+    Blocks are in row-major grid order, so a block's index gives its place in the picture.
+    """
+    gradients, colours = block_descriptors(image_bgr, size, cell, n_bins)
+    mean_colour = colours.reshape(len(colours), 4, 3).mean(axis=1)
+    return np.concatenate([gradients, mean_colour], axis=1)
+
+
+def hsv_histogram(image_bgr: np.ndarray, bins: Sequence[int] = DEFAULT_HSV_BINS) -> np.ndarray:
+    """The picture's joint hue × saturation × value histogram, as shares summing to one."""
+    hsv = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2HSV)
+    counts = cv2.calcHist([hsv], [0, 1, 2], None, list(bins), [0, 180, 0, 256, 0, 256]).ravel()
+    return (counts / max(float(counts.sum()), 1.0)).astype(np.float32)

@@ -76,3 +76,25 @@ def log_mel_frames(
     floor = max(float(energies.max()) * DYNAMIC_RANGE, float(np.finfo(np.float32).tiny))
     log_energies = np.log10(np.maximum(energies, floor))
     return (log_energies - log_energies.mean()).astype(np.float32)
+
+
+def log_mel_windows(
+    windows: np.ndarray,
+    rate: int,
+    frame_seconds: float,
+    n_mels: int,
+    fmin: float = DEFAULT_FMIN,
+    fmax: float = DEFAULT_FMAX,
+) -> np.ndarray:
+    """(n, frames, n_mels) level-free log-mel frames of (n, samples) windows at `rate`.
+
+    The FFT length follows the rate (a power of two near `frame_seconds`, half-overlapping), so
+    a model at 44.1 kHz sees the same time–frequency tiles as one at 22.05 kHz; `fmax` stays
+    below the rate's Nyquist frequency.
+    """
+    windows = np.atleast_2d(np.asarray(windows, dtype=np.float32))
+    n_fft = int(2 ** round(np.log2(frame_seconds * rate)))
+    fmax = min(fmax, 0.475 * rate)
+    return np.stack(
+        [log_mel_frames(w, rate, n_fft, n_fft // 2, n_mels, fmin, fmax) for w in windows]
+    )

@@ -1,0 +1,279 @@
+"""Servant's acoustic methods beside plain, well-known ones: same windows, same folds, one table.
+
+Every method sees the same 5 s windows at 22,050 Hz (`iter_recording_windows`) and is scored by
+`servant_core.evaluate.evaluate_windows` on the folds of `audio_plans`, exactly as
+`servant eval audio` scores Servant's own methods:
+
+- temporal: the first 60 % of each recording's windows train, the rest test (all scenes);
+- recording: leave one recording out, over the scenes with two recordings or more;
+- fewshot k: the first k windows of each recording train, the temporal test part tests.
+
+Peers (scikit-learn pipelines with a StandardScaler; their C chosen by cross-validation grouped
+by recording inside each fold's training windows — a window's recording travels with its
+features in a last column that the peer strips before fitting):
+
+- MFCC(20)+Δ mean/std + RBF SVM: MFCCs are the DCT of the project's own 40-band log-mel frames
+  (60 Hz–10.5 kHz, `features.logmel`), Δ their frame-to-frame gradient;
+- log-mel(64) mean/std + logistic regression, over the same band.
+
+pyAudioAnalysis is not among them: its 0.3.14 sdist declares no dependencies, yet its feature
+modules import matplotlib, tqdm, eyeD3 and pydub (and `aifc`, gone in Python 3.13) at import
+time; it is no clean bench-only extra, so it stays out.
+
+Servant's rows: `codebook` and `kmeans-encoder` (`paper` is far too slow for twenty-odd folds).
+The picture rows come from `bench/picture_peers.py` (`picture_rows`) when it is present.
+
+    OMP_NUM_THREADS=1 python bench/peers.py [--data ../shared/data] [--seeds 1] [--json FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import sys
+import time
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, Self
+
+import numpy as np
+from scipy.fft import dct
+from sklearn.linear_model import LogisticRegression
+from sklearn.model_selection import GridSearchCV, GroupKFold
+from sklearn.pipeline import make_pipeline
+from sklearn.preprocessing import StandardScaler
+from sklearn.svm import SVC
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from common import shared_data  # noqa: E402
+
+from servant_core.evaluate import (  # noqa: E402
+    AudioPlan,
+    audio_plans,
+    evaluate_windows,
+    seeded_params,
+)
+from servant_core.features.logmel import log_mel_frames  # noqa: E402
+from servant_core.library import SceneLibrary, WindowFeatures, iter_recording_windows  # noqa: E402
+from servant_core.recognisers import make_audio_recogniser  # noqa: E402
+
+RATE = 22050
+WINDOW_SECONDS = 5.0
+SHOTS = (1, 2, 3, 5, 10)
+SERVANT_METHODS = ("codebook", "kmeans-encoder")
+INNER_FOLDS = 3
+
+
+def mfcc_stats(windows: np.ndarray) -> np.ndarray:
+    """(n, 80): mean and std of 20 MFCCs and of their Δ over each window's frames."""
+    rows = []
+    for w in windows:
+        mfcc = dct(log_mel_frames(w, RATE, 1024, 512, 40), type=2, norm="ortho", axis=1)[:, :20]
+        delta = np.gradient(mfcc, axis=0)
+        rows.append(np.concatenate([mfcc.mean(0), mfcc.std(0), delta.mean(0), delta.std(0)]))
+    return np.array(rows)
+
+
+def logmel_stats(windows: np.ndarray) -> np.ndarray:
+    """(n, 128): mean and std of 64 log-mel bands over each window's frames."""
+    rows = []
+    for w in windows:
+        frames = log_mel_frames(w, RATE, 1024, 512, 64)
+        rows.append(np.concatenate([frames.mean(0), frames.std(0)]))
+    return np.array(rows)
+
+
+class Peer:
+    """A scikit-learn pipeline as a recogniser; its grid searched by grouped cross-validation.
+
+    Rows carry their recording's number in the last column (the groups of the search)."""
+
+    def __init__(self, pipeline: Any, grid: dict[str, list[float]]) -> None:
+        self.pipeline = pipeline
+        self.grid = grid
+
+    def fit(self, X: np.ndarray, scenes: np.ndarray) -> Self:
+        groups = X[:, -1]
+        folds = min(INNER_FOLDS, len(np.unique(groups)))
+        search = GridSearchCV(
+            self.pipeline, self.grid, cv=GroupKFold(folds), scoring="balanced_accuracy"
+        )
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # folds missing a scene warn; the search still ranks
+            self.model_ = search.fit(X[:, :-1], scenes, groups=groups).best_estimator_
+        return self
+
+    @property
+    def scenes_(self) -> list[str]:
+        return [str(s) for s in self.model_.classes_]
+
+    def predict(self, X: np.ndarray) -> np.ndarray:
+        return self.model_.predict(X[:, :-1])
+
+    def predict_proba(self, X: np.ndarray) -> np.ndarray:
+        return self.model_.predict_proba(X[:, :-1])
+
+
+PEERS: dict[str, tuple[Callable[[np.ndarray], np.ndarray], Callable[[int | None], Peer]]] = {
+    "MFCC(20)+Δ mean/std + RBF SVM": (
+        mfcc_stats,
+        lambda seed: Peer(
+            make_pipeline(
+                StandardScaler(),
+                SVC(
+                    class_weight="balanced",
+                    probability=True,
+                    random_state=0 if seed is None else seed,
+                ),
+            ),
+            {"svc__C": [1.0, 10.0, 100.0]},
+        ),
+    ),
+    "log-mel(64) mean/std + logistic regression": (
+        logmel_stats,
+        lambda seed: Peer(
+            make_pipeline(
+                StandardScaler(), LogisticRegression(class_weight="balanced", max_iter=3000)
+            ),
+            {"logisticregression__C": [0.01, 0.1, 1.0]},
+        ),
+    ),
+}
+
+
+def featurize_all(
+    library: SceneLibrary, featurizers: dict[str, Callable[[np.ndarray], np.ndarray]]
+) -> dict[str, WindowFeatures]:
+    """Each recording read once; every featurizer applied to its windows."""
+    parts: dict[str, list[np.ndarray]] = {name: [] for name in featurizers}
+    scenes: list[str] = []
+    recording: list[int] = []
+    position: list[int] = []
+    for index, rec, windows in iter_recording_windows(library.recordings, RATE, WINDOW_SECONDS):
+        for name, featurize in featurizers.items():
+            parts[name].append(featurize(windows))
+        scenes += [rec.scene] * len(windows)
+        recording += [index] * len(windows)
+        position += range(len(windows))
+    arrays = (np.array(scenes), np.array(recording), np.array(position))
+    return {
+        name: WindowFeatures(np.concatenate(p), *arrays, list(library.recordings))
+        for name, p in parts.items()
+    }
+
+
+def restricted(wf: WindowFeatures, keep: np.ndarray) -> WindowFeatures:
+    return WindowFeatures(
+        wf.features[keep], wf.scenes[keep], wf.recording[keep], wf.position[keep], wf.recordings
+    )
+
+
+def protocol_plans(wf: WindowFeatures) -> list[tuple[str, np.ndarray, list[AudioPlan]]]:
+    """(column name, rows kept, plans) of every protocol in the table."""
+    everything = np.ones(len(wf.scenes), bool)
+    per_scene = {s: len(np.unique(wf.recording[wf.scenes == s])) for s in set(wf.scenes)}
+    several = np.array([per_scene[s] >= 2 for s in wf.scenes])
+    columns = [("temporal", everything, audio_plans(wf, "temporal"))]
+    columns.append(("recording", several, audio_plans(restricted(wf, several), "recording")))
+    for plan in audio_plans(wf, "fewshot", SHOTS):
+        columns.append((f"k={plan.shots}", everything, [plan]))
+    return columns
+
+
+def audio_rows(data_root: Path, seeds: int) -> list[dict[str, Any]]:
+    library = SceneLibrary.scan(data_root / "audio" / "dev")
+    servant = {m: make_audio_recogniser(m, rate=RATE) for m in SERVANT_METHODS}
+    featurizers: dict[str, Callable[[np.ndarray], np.ndarray]] = {
+        name: featurize for name, (featurize, _) in PEERS.items()
+    }
+    featurizers.update({m: model.featurize for m, model in servant.items()})
+    features = featurize_all(library, featurizers)
+    names = [str(r.path.relative_to(library.root)) for r in library.recordings]
+    rows = []
+    for method, wf in features.items():
+        if method in PEERS:
+            wf = WindowFeatures(
+                np.hstack([wf.features, wf.recording[:, None].astype(float)]),
+                wf.scenes,
+                wf.recording,
+                wf.position,
+                wf.recordings,
+            )
+            make: Callable[[int | None], Any] = PEERS[method][1]
+        else:
+            make = lambda seed, m=method: make_audio_recogniser(  # noqa: E731
+                m, **seeded_params({"rate": RATE}, m, "audio", seed)
+            )
+        for column, keep, plans in protocol_plans(wf):
+            start = time.perf_counter()
+            (row,) = evaluate_windows(restricted(wf, keep), names, plans, make, seeds)
+            row.update(method=method, protocol=column, seconds=time.perf_counter() - start)
+            rows.append(row)
+            print(
+                f"  {method:<44} {column:<10} {row['balanced_accuracy']:.3f}",
+                file=sys.stderr,
+                flush=True,
+            )
+    return rows
+
+
+def picture_rows(data_root: Path, seeds: int) -> list[dict[str, Any]]:
+    """`bench/picture_peers.py`'s rows, when that bench is present."""
+    path = Path(__file__).resolve().parent / "picture_peers.py"
+    if not path.is_file():
+        return []
+    spec = importlib.util.spec_from_file_location("picture_peers", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return list(module.picture_rows(data_root, seeds))
+
+
+def figure(row: dict[str, Any]) -> str:
+    spread = row.get("spread")
+    std = spread["balanced_accuracy"]["std"] if isinstance(spread, dict) else spread
+    return f"{row['balanced_accuracy']:.3f}" + (f"±{std:.3f}" if std else "")
+
+
+def table(rows: list[dict[str, Any]], key: Callable[[dict[str, Any]], str]) -> str:
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    protocols = list(dict.fromkeys(r["protocol"] for r in rows))
+    cell = {(r["method"], r["protocol"]): key(r) for r in rows}
+    width = max(len(m) for m in methods)
+    lines = [f"{'method':<{width}}  " + "  ".join(f"{p:>12}" for p in protocols)]
+    for m in methods:
+        lines.append(
+            f"{m:<{width}}  " + "  ".join(f"{cell.get((m, p), '-'):>12}" for p in protocols)
+        )
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, default=shared_data(), help="the shared data root")
+    parser.add_argument("--seeds", type=int, default=1, help="random states per Servant method")
+    parser.add_argument("--json", type=Path, help="also write every row here")
+    parser.add_argument("--no-pictures", action="store_true", help="audio rows only")
+    args = parser.parse_args()
+    rows = audio_rows(args.data, args.seeds)
+    print(
+        f"audio: {args.data / 'audio' / 'dev'}, balanced accuracy (± std over {args.seeds} seeds)"
+    )
+    print(table(rows, figure))
+    print("\naudio: log loss")
+    print(table(rows, lambda r: f"{r['log_loss']:.2f}"))
+    pictures = [] if args.no_pictures else picture_rows(args.data, args.seeds)
+    if pictures:
+        print("\npictures: balanced accuracy (± std over seeds)")
+        print(table(pictures, figure))
+    if args.json:
+        args.json.write_text(json.dumps(rows + pictures, indent=1, default=str))
+
+
+if __name__ == "__main__":
+    main()

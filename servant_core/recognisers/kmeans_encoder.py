@@ -1,0 +1,319 @@
+"""`kmeans-encoder`: K-Means features with a discriminative head (Coates & Ng's single layer).
+
+1. Each 5 s window becomes log-mel frames over 60 Hz–10.5 kHz (a band every recording has,
+   whatever its sample rate), with the window's mean level removed (`features.logmel`).
+2. Frame statistics: each band's mean, spread and frame-to-frame change over the window: the
+   steady colour of a place and how much it moves.
+3. K-Means codebooks over standardised training frames (one per ensemble member, each from its
+   own random state). A frame is encoded by the triangle activation max(0, mean(z) − z_k) of its
+   distances z_k to the codewords (soft: a frame between two codewords uses both), pooled over
+   the window: how much of the window sounds like each codeword.
+4. Multinomial logistic regression over the standardised statistics and encodings gives
+   calibrated probabilities; it keeps one weight vector per scene, so a scene taught with one
+   window is not starved of centroids (no "one centroid per 8 rows").
+5. Robustness to the microphone: every training window is also seen through random
+   equalisations (a tilt and a bend of the log spectrum), so the head cannot lean on a
+   recording's colouration.
+6. Open set: one K-Means centroid per scene over the standardised descriptors with its own
+   spread (`SceneCentroids`); a window farther than the rejection distance from every centroid
+   is `UNKNOWN`.
+
+`C` and `augment` are the choice of cross-validation grouped by recording inside the training
+library (`bench/kmeans_encoder_search.py`); the other defaults come from earlier rounds of that
+kind (README, issue 11 section).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, ClassVar, Self
+
+import numpy as np
+from sklearn.cluster import KMeans
+from sklearn.exceptions import NotFittedError
+from sklearn.linear_model import LogisticRegression
+
+from servant_core.features.logmel import DEFAULT_FMAX, DEFAULT_FMIN, log_mel_windows
+from servant_core.recognisers.base import PERCENT, UNKNOWN, check_training_scenes
+from servant_core.recognisers.centroids import SceneCentroids
+
+ENCODER_RATE = 22050
+SCALE_FLOOR = 0.1
+NOVELTY_SHRINKAGE = 0.0
+
+
+def frame_statistics(frames: np.ndarray) -> np.ndarray:
+    """(n, 3·bands): per band, the mean and std over frames and the std of its frame-to-frame
+    change, of (n, frames, bands) log-mel windows."""
+    change = np.diff(frames, axis=1)
+    return np.concatenate([frames.mean(axis=1), frames.std(axis=1), change.std(axis=1)], axis=1)
+
+
+def triangle_encoding(frames: np.ndarray, codewords: np.ndarray) -> np.ndarray:
+    """(n, K): the triangle activations max(0, mean_k z − z_k) of each frame, where z_k is its
+    distance to codeword k, averaged over each window's frames (Coates, Lee & Ng 2011)."""
+    n, t, d = frames.shape
+    flat = frames.reshape(-1, d).astype(np.float32)
+    squared = (
+        np.sum(flat**2, axis=1, keepdims=True)
+        - 2.0 * flat @ codewords.T
+        + np.sum(codewords**2, axis=1)[None, :]
+    )
+    z = np.sqrt(np.maximum(squared, 0.0))
+    active = np.maximum(0.0, z.mean(axis=1, keepdims=True) - z)
+    return active.reshape(n, t, -1).mean(axis=1)
+
+
+def equalised(frames: np.ndarray, rng: np.random.Generator, strength: float) -> np.ndarray:
+    """`frames` through a random equaliser per window: a tilt and a bend of the log spectrum of
+    up to `strength` (log10 units at the band edges), as another microphone would colour it."""
+    bands = frames.shape[-1]
+    x = np.linspace(-1.0, 1.0, bands)
+    tilt = rng.uniform(-strength, strength, (len(frames), 1)) * x
+    bend = rng.uniform(-strength, strength, (len(frames), 1)) * (x**2 - 1.0 / 3.0)
+    curve = (tilt + bend)[:, None, :]
+    return (frames + curve - curve.mean(axis=-1, keepdims=True)).astype(np.float32)
+
+
+def softmax_proba(scores: np.ndarray) -> np.ndarray:
+    scores = scores - scores.max(axis=1, keepdims=True)
+    e = np.exp(scores)
+    return e / e.sum(axis=1, keepdims=True)
+
+
+class KMeansEncoderAcousticRecogniser:
+    method: ClassVar[str] = "kmeans-encoder"
+    sense: ClassVar[str] = "audio"
+    confidence_unit: ClassVar[str] = PERCENT
+
+    def __init__(
+        self,
+        *,
+        rate: int = ENCODER_RATE,
+        window_seconds: float = 5.0,
+        n_mels: int = 40,
+        frame_seconds: float = 0.046,
+        fmin: float = DEFAULT_FMIN,
+        fmax: float = DEFAULT_FMAX,
+        n_codewords: int = 64,
+        n_codebooks: int = 3,
+        C: float = 0.5,
+        augment: int = 2,
+        crops: int = 4,
+        eq_strength: float = 0.45,
+        max_codebook_frames: int = 20000,
+        reject_quantile: float = 0.95,
+        reject_margin: float = 1.7,
+        random_state: int | None = 0,
+    ) -> None:
+        self.rate = rate
+        self.window_seconds = window_seconds
+        self.n_mels = n_mels
+        self.frame_seconds = frame_seconds
+        self.fmin = fmin
+        self.fmax = fmax
+        self.n_codewords = n_codewords
+        self.n_codebooks = n_codebooks
+        self.C = C
+        self.augment = augment
+        self.crops = crops
+        self.eq_strength = eq_strength
+        self.max_codebook_frames = max_codebook_frames
+        self.reject_quantile = reject_quantile
+        self.reject_margin = reject_margin
+        self.random_state = random_state
+
+    def params(self) -> dict[str, Any]:
+        return {
+            "rate": self.rate,
+            "window_seconds": self.window_seconds,
+            "n_mels": self.n_mels,
+            "frame_seconds": self.frame_seconds,
+            "fmin": self.fmin,
+            "fmax": self.fmax,
+            "n_codewords": self.n_codewords,
+            "n_codebooks": self.n_codebooks,
+            "C": self.C,
+            "augment": self.augment,
+            "crops": self.crops,
+            "eq_strength": self.eq_strength,
+            "max_codebook_frames": self.max_codebook_frames,
+            "reject_quantile": self.reject_quantile,
+            "reject_margin": self.reject_margin,
+            "random_state": self.random_state,
+        }
+
+    def featurize(self, windows: np.ndarray) -> np.ndarray:
+        """(n, frames, n_mels) level-free log-mel frames of (n, samples) windows at `rate`."""
+        return log_mel_windows(
+            windows, self.rate, self.frame_seconds, self.n_mels, self.fmin, self.fmax
+        )
+
+    # -- learning ---------------------------------------------------------------------------
+
+    def fit(self, X: np.ndarray, scenes: Sequence[str] | np.ndarray) -> Self:
+        check_training_scenes(scenes, len(X))
+        X = np.asarray(X, dtype=np.float32)
+        scenes_arr = np.asarray(scenes).astype(str)
+        rng = np.random.default_rng(self.random_state)
+        views = [X] + [equalised(X, rng, self.eq_strength) for _ in range(self.augment)]
+        frames = np.concatenate(views)
+        flat = frames.reshape(-1, frames.shape[-1])
+        sample = flat[rng.choice(len(flat), min(len(flat), self.max_codebook_frames), False)]
+        self.frame_mean_ = sample.mean(axis=0, dtype=np.float32)
+        self.frame_scale_ = (sample.std(axis=0) + 1e-6).astype(np.float32)
+        standard = (sample - self.frame_mean_) / self.frame_scale_
+        seeds = rng.integers(0, 2**31 - 1, self.n_codebooks)
+        k = min(self.n_codewords, len(standard))
+        self.codebooks_ = np.stack(
+            [
+                KMeans(k, n_init=1, random_state=int(seed)).fit(standard).cluster_centers_
+                for seed in seeds
+            ]
+        ).astype(np.float32)
+        parts = [frames, *self._crops(X)]
+        D = np.vstack([self.describe(part) for part in parts]).astype(np.float64)
+        # A codeword almost no training frame comes near has next to no spread; unfloored, a new
+        # place that does come near it would sit thousands of spreads away on that one column.
+        spread = D.std(axis=0)
+        self.descriptor_mean_ = D.mean(axis=0)
+        self.descriptor_scale_ = np.maximum(spread, SCALE_FLOOR * np.median(spread) + 1e-12)
+        self.train_descriptors_ = self._standardise(D)
+        copies = len(D) // len(X)
+        self.train_scenes_ = np.tile(scenes_arr, copies)
+        self.train_derived_ = np.arange(len(D)) >= len(X)
+        self._fit_heads()
+        return self
+
+    def _crops(self, frames: np.ndarray) -> list[np.ndarray]:
+        """`crops` evenly spaced halves of the windows: with a window or two a scene (a first
+        teach session) the head still sees how a place varies within itself."""
+        half = frames.shape[1] // 2
+        starts = np.linspace(0, frames.shape[1] - half, self.crops).astype(int)
+        return [frames[:, s : s + half] for s in starts]
+
+    def _fit_heads(self) -> None:
+        """The logistic head over every stored descriptor; the open set's centroids (one a
+        scene, equal spreads) over the windows as heard, not their equalised copies."""
+        self._fit_head()
+        heard = ~self.train_derived_
+        self.novelty_head_ = SceneCentroids.fit(
+            self.train_descriptors_[heard],
+            self.train_scenes_[heard],
+            1,
+            self.reject_quantile,
+            self.reject_margin,
+            self.random_state,
+            NOVELTY_SHRINKAGE,
+        )
+
+    def _fit_head(self) -> None:
+        # Scenes come with very different numbers of windows; each weighs the same.
+        head = LogisticRegression(C=self.C, class_weight="balanced", max_iter=3000)
+        head.fit(self.train_descriptors_, self.train_scenes_)
+        self.classes_ = [str(c) for c in head.classes_]
+        coef, intercept = head.coef_, head.intercept_
+        if len(self.classes_) == 2:  # scikit-learn keeps one weight vector for two classes
+            coef = np.vstack([-coef / 2, coef / 2])
+            intercept = np.array([-intercept[0] / 2, intercept[0] / 2])
+        self.coef_ = coef
+        self.intercept_ = intercept
+
+    def fold_in(self, X: np.ndarray, scenes: Sequence[str]) -> Self:
+        """Add windows with confirmed labels: both heads are refitted on the stored training
+        descriptors plus these (the codebooks stay), so a new scene becomes known."""
+        if len(scenes) != len(X):
+            raise ValueError(f"{len(X)} feature rows but {len(scenes)} scene labels")
+        D = self.descriptors(X)
+        self.train_descriptors_ = np.vstack([self.train_descriptors_, D])
+        self.train_scenes_ = np.concatenate([self.train_scenes_, np.asarray(scenes, dtype=str)])
+        self.train_derived_ = np.concatenate([self.train_derived_, np.zeros(len(D), bool)])
+        self._fit_heads()
+        return self
+
+    # -- describing and deciding ------------------------------------------------------------
+
+    def describe(self, X: np.ndarray) -> np.ndarray:
+        """Frame statistics beside every codebook's triangle encoding, before standardising."""
+        frames = np.asarray(X, dtype=np.float32)
+        standard = (frames - self.frame_mean_) / self.frame_scale_
+        parts = [frame_statistics(frames)]
+        parts += [triangle_encoding(standard, codebook) for codebook in self.codebooks_]
+        return np.concatenate(parts, axis=1)
+
+    def _standardise(self, D: np.ndarray) -> np.ndarray:
+        return (D - self.descriptor_mean_) / self.descriptor_scale_
+
+    def descriptors(self, X: np.ndarray) -> np.ndarray:
+        self._check_fitted()
+        return self._standardise(self.describe(X))
+
+    @property
+    def scenes_(self) -> list[str]:
+        self._check_fitted()
+        return self.classes_
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "coef_"):
+            raise NotFittedError(f"this {type(self).__name__} is not fitted yet; call fit first")
+
+    def _proba(self, D: np.ndarray) -> np.ndarray:
+        return softmax_proba(D @ self.coef_.T + self.intercept_)
+
+    def predict_proba(self, X: np.ndarray) -> np.ndarray:
+        return self._proba(self.descriptors(X))
+
+    def predict(self, X: np.ndarray) -> np.ndarray:
+        D = self.descriptors(X)
+        names = np.asarray(self.classes_, dtype=object)[np.argmax(self._proba(D), axis=1)]
+        names[self.novelty_head_.is_unknown(D)] = UNKNOWN
+        return names.astype(str)
+
+    def confidence(self, X: np.ndarray) -> np.ndarray:
+        """The probability of the most likely scene, in percent."""
+        return 100.0 * np.max(self.predict_proba(X), axis=1)
+
+    def novelty(self, X: np.ndarray) -> np.ndarray:
+        """Distance to the nearest scene centroid in its spreads over the rejection distance:
+        above 1 a window is unknown."""
+        head = self.novelty_head_
+        return head.nearest_scaled(self.descriptors(X)) / head.reject_distance
+
+    # -- model files ------------------------------------------------------------------------
+
+    def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        self._check_fitted()
+        novelty, novelty_arrays = self.novelty_head_.state()
+        header = {"params": self.params(), "classes": self.classes_, "novelty": novelty}
+        arrays = {
+            "frame_mean": self.frame_mean_,
+            "frame_scale": self.frame_scale_,
+            "codebooks": self.codebooks_,
+            "descriptor_mean": self.descriptor_mean_,
+            "descriptor_scale": self.descriptor_scale_,
+            "coef": self.coef_,
+            "intercept": self.intercept_,
+            "train_descriptors": self.train_descriptors_.astype(np.float32),
+            "train_scenes": self.train_scenes_.astype(str),
+            "train_derived": self.train_derived_,
+            **{f"novelty_{k}": v for k, v in novelty_arrays.items()},
+        }
+        return header, arrays
+
+    @classmethod
+    def from_state(cls, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> Self:
+        model = cls(**header["params"])
+        model.classes_ = [str(c) for c in header["classes"]]
+        model.frame_mean_ = np.asarray(arrays["frame_mean"], dtype=np.float32)
+        model.frame_scale_ = np.asarray(arrays["frame_scale"], dtype=np.float32)
+        model.codebooks_ = np.asarray(arrays["codebooks"], dtype=np.float32)
+        model.descriptor_mean_ = np.asarray(arrays["descriptor_mean"], dtype=np.float64)
+        model.descriptor_scale_ = np.asarray(arrays["descriptor_scale"], dtype=np.float64)
+        model.coef_ = np.asarray(arrays["coef"], dtype=np.float64)
+        model.intercept_ = np.asarray(arrays["intercept"], dtype=np.float64)
+        model.train_descriptors_ = np.asarray(arrays["train_descriptors"], dtype=np.float64)
+        model.train_scenes_ = np.asarray(arrays["train_scenes"]).astype(str)
+        model.train_derived_ = np.asarray(arrays["train_derived"], dtype=bool)
+        prefixed = {k[len("novelty_") :]: v for k, v in arrays.items() if k.startswith("novelty_")}
+        model.novelty_head_ = SceneCentroids.from_state(header["novelty"], prefixed)
+        return model

@@ -1,0 +1,117 @@
+"""The kmeans-encoder acoustic method: its maths, probabilities, few examples, open set, fold-in,
+model files; and (slow) its key figure on the real data."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from sklearn.exceptions import NotFittedError
+from sklearn.linear_model import LogisticRegression
+
+from servant_core.modelfile import load_model, save_model
+from servant_core.recognisers import UNKNOWN, make_recogniser
+from servant_core.recognisers.kmeans_encoder import (
+    KMeansEncoderAcousticRecogniser,
+    equalised,
+    triangle_encoding,
+)
+from tests.test_codebook import noise_scene
+
+SMALL = {"n_codewords": 8, "n_codebooks": 2, "augment": 1}
+
+
+@pytest.fixture(scope="module")
+def trained() -> tuple[KMeansEncoderAcousticRecogniser, dict[str, np.ndarray]]:
+    rng = np.random.default_rng(1)
+    scenes = {
+        "low": noise_scene(rng, 300, 6),
+        "mid": noise_scene(rng, 1500, 6),
+        "high": noise_scene(rng, 4000, 6),
+    }
+    model = KMeansEncoderAcousticRecogniser(**SMALL)
+    X = model.featurize(np.concatenate(list(scenes.values())))
+    model.fit(X, [s for s in scenes for _ in range(6)])
+    return model, scenes
+
+
+def test_triangle_encoding_small_exact_case() -> None:
+    codewords = np.array([[0.0, 0.0], [3.0, 4.0]], np.float32)
+    frames = np.array([[[0.0, 0.0], [3.0, 4.0]]], np.float32)  # one window, two frames
+    # frame 0: distances (0, 5), mean 2.5 -> (2.5, 0); frame 1: (5, 0) -> (0, 2.5)
+    np.testing.assert_allclose(triangle_encoding(frames, codewords), [[1.25, 1.25]], atol=1e-5)
+
+
+def test_equaliser_colours_but_keeps_the_level() -> None:
+    frames = np.zeros((4, 3, 10), np.float32)
+    out = equalised(frames, np.random.default_rng(0), 0.3)
+    np.testing.assert_allclose(out.mean(axis=-1), 0.0, atol=1e-6)
+    assert np.abs(out).max() > 0.01 and np.abs(out).max() <= 0.6 + 1e-6
+
+
+def test_probabilities_sum_to_one_and_favour_the_truth(trained) -> None:
+    model, scenes = trained
+    rng = np.random.default_rng(5)
+    for scene, centre in [("low", 300), ("mid", 1500), ("high", 4000)]:
+        proba = model.predict_proba(model.featurize(noise_scene(rng, centre, 2)))
+        np.testing.assert_allclose(proba.sum(axis=1), 1.0)
+        assert np.all(np.argmax(proba, axis=1) == model.scenes_.index(scene))
+    assert model.confidence_unit == "%"
+
+
+def test_two_scenes_give_scikit_learns_probabilities(trained) -> None:
+    model, scenes = trained
+    X = model.featurize(np.concatenate([scenes["low"], scenes["mid"]]))
+    two = KMeansEncoderAcousticRecogniser(**SMALL).fit(X, ["low"] * 6 + ["mid"] * 6)
+    reference = LogisticRegression(C=two.C, class_weight="balanced", max_iter=3000).fit(
+        two.train_descriptors_, two.train_scenes_
+    )
+    np.testing.assert_allclose(
+        two.predict_proba(X), reference.predict_proba(two.descriptors(X)), atol=1e-6
+    )
+
+
+def test_one_window_a_scene_does_not_collapse(trained) -> None:
+    model, scenes = trained
+    X = model.featurize(np.stack([scenes["low"][0], scenes["mid"][0], scenes["high"][0]]))
+    taught = KMeansEncoderAcousticRecogniser(**SMALL).fit(X, ["low", "mid", "high"])
+    rng = np.random.default_rng(9)
+    for scene, centre in [("low", 300), ("mid", 1500), ("high", 4000)]:
+        heard = taught.predict(taught.featurize(noise_scene(rng, centre, 2)))
+        assert list(heard) == [scene] * 2  # nothing unknown yet: no spread can be measured
+
+
+def test_far_window_is_unknown_and_fold_in_learns_it(trained) -> None:
+    model, _ = trained
+    model = KMeansEncoderAcousticRecogniser.from_state(*model.get_state())
+    rng = np.random.default_rng(3)
+    hiss = model.featurize(noise_scene(rng, 9000, 6))
+    assert list(model.predict(hiss)) == [UNKNOWN] * 6
+    model.fold_in(hiss, ["hiss"] * 6)
+    assert "hiss" in model.scenes_
+    assert list(model.predict(model.featurize(noise_scene(rng, 9000, 2)))) == ["hiss"] * 2
+
+
+def test_model_file_round_trip(trained, tmp_path) -> None:
+    model, scenes = trained
+    path = save_model(tmp_path / "m.npz", {"acoustic": model})
+    loaded = load_model(path)["acoustic"]
+    X = model.featurize(scenes["mid"][:3])
+    np.testing.assert_allclose(loaded.predict_proba(X), model.predict_proba(X))
+    assert list(loaded.predict(X)) == list(model.predict(X))
+
+
+def test_registered_and_unfitted_raises() -> None:
+    model = make_recogniser("audio", "kmeans-encoder")
+    with pytest.raises(NotFittedError):
+        model.predict(np.zeros((1, 10, 40), np.float32))
+
+
+@pytest.mark.slow
+def test_few_shot_on_the_real_recordings(shared_data) -> None:
+    """Three windows of each real recording teach it; the later 40 % of each is recognised."""
+    from servant_core.evaluate import evaluate_audio
+    from servant_core.library import SceneLibrary
+
+    library = SceneLibrary.scan(shared_data / "audio" / "dev")
+    result = evaluate_audio(library, "kmeans-encoder", "fewshot", shots=(3,))
+    assert result["rows"][0]["balanced_accuracy"] >= 0.85
