@@ -10,6 +10,9 @@ stratified cross-validation inside the training pictures:
   cross-validation;
 - Servant's `bovw` and `softbovw`, as `servant eval image --method M` runs them.
 
+A peer decides by its SVM; its probabilities (for the log loss) come from a sigmoid calibration
+of the chosen SVM on folds of the training pictures.
+
 Every method runs once per random state 0 … seeds − 1 (K-Means, SVM and fold shuffles); a row
 holds the mean and the spread (standard deviation) of balanced accuracy over them.
 
@@ -28,6 +31,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from sklearn.base import clone
 from sklearn.calibration import CalibratedClassifierCV
 from sklearn.metrics import accuracy_score, balanced_accuracy_score
 from sklearn.model_selection import GridSearchCV, StratifiedKFold
@@ -67,24 +71,21 @@ def hog_hsv_rows(images: list[np.ndarray]) -> np.ndarray:
 
 def calibrated(estimator: Any) -> Any:
     # SVMs give no probabilities; a sigmoid fitted on held-out folds of the training part does
-    return CalibratedClassifierCV(estimator, cv=3, method="sigmoid", ensemble=False)
+    return CalibratedClassifierCV(clone(estimator), cv=3, method="sigmoid", ensemble=False)
 
 
 def hsv_svm(seed: int) -> Any:
     folds = StratifiedKFold(CV_FOLDS, shuffle=True, random_state=seed)
-    pipeline = make_pipeline(StandardScaler(), calibrated(SVC(class_weight="balanced")))
-    grid = {
-        "calibratedclassifiercv__estimator__C": [1, 10, 100],
-        "calibratedclassifiercv__estimator__gamma": ["scale", 0.01, 0.001],
-    }
+    pipeline = make_pipeline(StandardScaler(), SVC(class_weight="balanced"))
+    grid = {"svc__C": [1, 10, 100], "svc__gamma": ["scale", 0.01, 0.001]}
     return GridSearchCV(pipeline, grid, cv=folds, scoring="balanced_accuracy")
 
 
 def hog_hsv_linear_svm(seed: int) -> Any:
     folds = StratifiedKFold(CV_FOLDS, shuffle=True, random_state=seed)
     svm = LinearSVC(class_weight="balanced", random_state=seed)
-    pipeline = make_pipeline(StandardScaler(), calibrated(svm))
-    grid = {"calibratedclassifiercv__estimator__C": [1e-4, 1e-3, 1e-2]}
+    pipeline = make_pipeline(StandardScaler(), svm)
+    grid = {"linearsvc__C": [1e-4, 1e-3, 1e-2]}
     return GridSearchCV(pipeline, grid, cv=folds, scoring="balanced_accuracy")
 
 
@@ -134,12 +135,14 @@ def picture_rows(data_root: Path, seeds: int = 1) -> list[dict[str, Any]]:
         runs = []
         for seed in range(seeds):
             model = make(seed).fit(X[train], scenes[train])
+            # decisions are the SVM's own; probabilities (for the log loss) from its calibration
+            proba = calibrated(model.best_estimator_).fit(X[train], scenes[train])
             runs.append(
                 figures(
                     scenes[~train],
-                    model.predict_proba(X[~train]),
+                    proba.predict_proba(X[~train]),
                     model.predict(X[~train]),
-                    list(model.classes_),
+                    list(proba.classes_),
                 )
             )
         rows.append(row(name, protocol, runs))
