@@ -58,13 +58,11 @@ from servant_core.features.palette import dominant_colours
 from servant_core.fusion import POLICIES, FusionConfig, FusionPolicy, SequentialFusion
 from servant_core.library import SceneLibrary, featurize_recordings, read_pictures
 from servant_core.modelfile import save_model
-from servant_core.recognisers import UNKNOWN, Recogniser, make_recogniser
+from servant_core.recognisers import FRESH_METHODS, UNKNOWN, Recogniser, make_recogniser
 from servant_core.storage import atomic_write_bytes, data_dir
 
 log = logging.getLogger(__name__)
 
-# What a retrain fits for a sense that has no recogniser yet: the methods beyond the paper.
-FRESH_METHODS = {"audio": "codebook", "image": "bovw"}
 
 Subscriber = Callable[[Event], None]
 Pose = Mapping[str, float]

@@ -7,6 +7,7 @@ is stored as a 0-d unicode array named `header`; a recogniser's arrays are store
 
 from __future__ import annotations
 
+import collections.abc
 import json
 import math
 import typing
@@ -220,9 +221,11 @@ def _recogniser(
         _check_params(cls, state.get("params"))
         _check_scenes(state)
         _check_arrays(parts)
-        _check_centroids(state, parts, "")
+        # methods with a discriminative head keep their only centroids under `novelty`
+        if "centres" in parts or not isinstance(state.get("novelty"), dict):
+            _check_centroids(state, parts, "", state["scenes"])
         if isinstance(state.get("novelty"), dict):
-            _check_centroids(state["novelty"], parts, "novelty_")
+            _check_centroids(state["novelty"], parts, "novelty_", state["scenes"])
     except ValueError as exc:
         raise _damaged(path, f"{role}: {exc}") from None
     try:
@@ -235,6 +238,10 @@ def _recogniser(
     return recogniser
 
 
+# parameter types a JSON list stands for
+SEQUENCES = (tuple, list, collections.abc.Sequence)
+
+
 def _check_params(cls: type, params: Any) -> None:
     """Each parameter must be one the method takes, of the type its `__init__` declares (a
     float may be written as a whole number), and numbers within limits."""
@@ -244,6 +251,9 @@ def _check_params(cls: type, params: Any) -> None:
     for name, value in params.items():
         if name not in hints or name == "return":
             raise ValueError(f"unknown parameter {str(name)[:40]!r}")
+        if isinstance(value, list) and typing.get_origin(hints[name]) in SEQUENCES:
+            _check_numbers(name, value)  # e.g. softbovw's pyramid grids, (1, 2) in JSON
+            continue
         allowed = typing.get_args(hints[name]) or (hints[name],)
         kind = type(value)
         if not (
@@ -259,6 +269,15 @@ def _check_params(cls: type, params: Any) -> None:
                 raise ValueError(f"parameter {name} is {value!r}, outside {low:g}–{high:g}")
 
 
+def _check_numbers(name: str, values: list[Any]) -> None:
+    """A short list of numbers within the parameter's limits."""
+    low, high = PARAM_LIMITS.get(name, GENERIC_LIMIT)
+    if len(values) > 16 or not all(
+        type(v) in (int, float) and math.isfinite(v) and low <= v <= high for v in values
+    ):
+        raise ValueError(f"parameter {name} is {str(values)[:20]!r}")
+
+
 def _check_scenes(state: dict[str, Any]) -> None:
     scenes = state.get("scenes")
     if (
@@ -268,21 +287,28 @@ def _check_scenes(state: dict[str, Any]) -> None:
         or len(set(scenes)) != len(scenes)
     ):
         raise ValueError("its scenes are not a list of two or more distinct names")
-    owners = state.get("cluster_scene")
-    if not isinstance(owners, list) or not all(o is None or o in scenes for o in owners):
-        raise ValueError("its clusters name scenes it does not have")
+
+
+# arrays that hold text: the scene of each training row a method keeps for its fold-in
+TEXT_ARRAYS = {"train_scenes"}
 
 
 def _check_arrays(parts: dict[str, np.ndarray]) -> None:
+    """Finite numbers in at most three dimensions (stacked codebooks); text only where a
+    method stores it (`TEXT_ARRAYS`), one dimension."""
     for name, array in parts.items():
-        if array.dtype.kind not in "biuf" or array.ndim > 2:
+        if name in TEXT_ARRAYS and array.dtype.kind == "U" and array.ndim == 1:
+            continue
+        if array.dtype.kind not in "biuf" or array.ndim > 3:
             raise ValueError(f"array {name} is not a table of numbers")
         if array.dtype.kind == "f" and not np.all(np.isfinite(array)):
             raise ValueError(f"array {name} holds NaN or infinity")
 
 
-def _check_centroids(state: dict[str, Any], parts: dict[str, np.ndarray], prefix: str) -> None:
-    """Centres (K, d), one spread (and count) a centre, one scene (or None) a centre."""
+def _check_centroids(
+    state: dict[str, Any], parts: dict[str, np.ndarray], prefix: str, scenes: list[str]
+) -> None:
+    """Centres (K, d), one spread (and count) a centre, one of `scenes` (or None) a centre."""
     centres = parts.get(f"{prefix}centres")
     if centres is None:
         raise ValueError(f"no {prefix}centres")
@@ -298,6 +324,8 @@ def _check_centroids(state: dict[str, Any], parts: dict[str, np.ndarray], prefix
     owners = state.get("cluster_scene")
     if not isinstance(owners, list) or len(owners) != k:
         raise ValueError(f"{k} centres but {len(owners) if isinstance(owners, list) else 0} owners")
+    if not all(o is None or o in scenes for o in owners):
+        raise ValueError("its clusters name scenes it does not have")
 
 
 def _try_out(recogniser: Recogniser) -> None:

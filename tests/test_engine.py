@@ -17,7 +17,7 @@ from servant_core.cli import build_parser
 from servant_core.cli.live import live_settings
 from servant_core.demo.audio_synth import DEMO_RATE
 from servant_core.demo.scenes import SCENES, synth_picture, synth_window, train_demo_recognisers
-from servant_core.engine import Engine, build_demo_engine, spectrum_db
+from servant_core.engine import FRESH_METHODS, Engine, build_demo_engine, spectrum_db
 from servant_core.errors import ServantError
 from servant_core.events import (
     AcousticPrediction,
@@ -154,13 +154,11 @@ def test_a_first_retrain_without_recognisers_fits_fresh_ones_and_saves_them(libr
     model_file = tmp_path / "model.npz"
     engine = Engine(model_path=model_file)
     engine.retrain(library.root)
-    assert engine.acoustic.method == "codebook" and engine.visual.method == "bovw"
+    fresh_methods = {"acoustic": FRESH_METHODS["audio"], "visual": FRESH_METHODS["image"]}
+    assert {"acoustic": engine.acoustic.method, "visual": engine.visual.method} == fresh_methods
     assert engine.acoustic.scenes_ == engine.visual.scenes_ == sorted(SCENES)
     saved = load_model(model_file)
-    assert {role: m.method for role, m in saved.items()} == {
-        "acoustic": "codebook",
-        "visual": "bovw",
-    }
+    assert {role: m.method for role, m in saved.items()} == fresh_methods
     acoustic = saved["acoustic"]
     fresh = np.stack(
         [

@@ -5,6 +5,7 @@ import pytest
 
 from servant_core.errors import ServantError
 from servant_core.modelfile import VERSION, load_model, save_model
+from servant_core.recognisers import ACOUSTIC_METHODS, VISUAL_METHODS
 from servant_core.recognisers.paper import PaperVisualRecogniser
 from servant_core.storage import atomic_save_npz
 
@@ -242,3 +243,31 @@ def test_an_array_header_numpy_cannot_tokenize_is_refused(tmp_path):
     data[at + len("'fortran_order'")] = ord("#")
     path.write_bytes(bytes(data))
     refused_in_one_line(path, "bad array header|not a Servant model file")
+
+
+def _fitted(sense: str, method: str):
+    from servant_core.demo.audio_synth import DEMO_RATE
+    from servant_core.demo.scenes import training_set
+    from servant_core.recognisers import make_recogniser
+
+    windows, window_scenes, pictures, picture_scenes = training_set(0, 3, 3)
+    if sense == "audio":
+        model = make_recogniser(sense, method, rate=DEMO_RATE)
+        return model.fit(model.featurize(windows), window_scenes)
+    model = make_recogniser(sense, method)
+    return model.fit(model.featurize(pictures), picture_scenes)
+
+
+@pytest.mark.parametrize(
+    ("sense", "method"),
+    [("audio", m) for m in sorted(ACOUSTIC_METHODS)]
+    + [("image", m) for m in sorted(VISUAL_METHODS)],
+)
+def test_every_method_survives_the_checks_of_its_own_model_file(tmp_path, sense, method):
+    """The checks at load time must accept what each method saves (kmeans-encoder's stacked
+    codebooks and softbovw's grids once were refused as damaged)."""
+    role = "acoustic" if sense == "audio" else "visual"
+    model = _fitted(sense, method)
+    path = save_model(tmp_path / "model.npz", {role: model})
+    loaded = load_model(path)[role]
+    assert loaded.method == method and loaded.scenes_ == model.scenes_

@@ -29,7 +29,7 @@ from servant_core.audio import DEFAULT_WINDOW_SECONDS, write_wav
 from servant_core.capture.replay import Clip, PacedAudio
 from servant_core.demo.audio_synth import DEMO_RATE, SCENE_SOUNDS
 from servant_core.demo.picture_synth import SCENE_PICTURES
-from servant_core.recognisers import make_recogniser
+from servant_core.recognisers import FRESH_METHODS, make_recogniser
 from servant_core.recognisers.paper import PaperAcousticRecogniser, PaperVisualRecogniser
 from servant_core.storage import atomic_write_bytes
 
@@ -120,8 +120,8 @@ def demo_recognisers(seed: int = 0, *, paper: bool = True) -> tuple[Any, Any]:
             PaperVisualRecogniser(random_state=seed),
         )
     return (
-        make_recogniser("audio", "codebook", rate=DEMO_RATE, random_state=seed),
-        make_recogniser("image", "bovw", random_state=seed),
+        make_recogniser("audio", FRESH_METHODS["audio"], rate=DEMO_RATE, random_state=seed),
+        make_recogniser("image", FRESH_METHODS["image"], random_state=seed),
     )
 
 

@@ -36,6 +36,11 @@ def make_audio_recogniser(method: str, **params: Any) -> AcousticRecogniser:
     return cast(AcousticRecogniser, make_recogniser("audio", method, **params))
 
 
+# What a retrain fits for a sense that has no recogniser yet, and what `servant train` and the
+# demo use: the methods beyond the paper that lead on every protocol (docs/research.md).
+FRESH_METHODS = {"audio": "kmeans-encoder", "image": "bovw"}
+
+
 def make_recogniser(sense: str, method: str, **params: Any) -> Recogniser:
     methods = methods_for(sense)
     if method not in methods:
@@ -47,6 +52,7 @@ def make_recogniser(sense: str, method: str, **params: Any) -> Recogniser:
 
 __all__ = [
     "ACOUSTIC_METHODS",
+    "FRESH_METHODS",
     "AcousticRecogniser",
     "UNKNOWN",
     "VISUAL_METHODS",

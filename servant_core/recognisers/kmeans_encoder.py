@@ -284,7 +284,12 @@ class KMeansEncoderAcousticRecogniser:
     def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         self._check_fitted()
         novelty, novelty_arrays = self.novelty_head_.state()
-        header = {"params": self.params(), "classes": self.classes_, "novelty": novelty}
+        header = {
+            "params": self.params(),
+            "classes": self.classes_,
+            "scenes": self.scenes_,
+            "novelty": novelty,
+        }
         arrays = {
             "frame_mean": self.frame_mean_,
             "frame_scale": self.frame_scale_,
