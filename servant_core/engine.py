@@ -56,6 +56,7 @@ from servant_core.events import (
 )
 from servant_core.features.palette import dominant_colours
 from servant_core.fusion import POLICIES, FusionConfig, FusionPolicy, SequentialFusion
+from servant_core.fusion.smoothing import STEADY_FLOOR, STEADY_STAY, SceneSmoother
 from servant_core.library import SceneLibrary, featurize_recordings, read_pictures
 from servant_core.modelfile import save_model
 from servant_core.recognisers import FRESH_METHODS, UNKNOWN, Recogniser, make_recogniser
@@ -118,6 +119,9 @@ class Engine:
       restart; None (the demo, or no model) keeps updates in memory only.
     - `confidence_threshold`: percent; the arm does not act on a decision whose scene the less
       sure sense gives less than this (None: no threshold of the engine's own).
+    - `smoother`: a `SceneSmoother` that filters consecutive windows' probabilities, so that one
+      odd window does not flip the scene (recognisers in percent only; None: each window alone).
+      It starts afresh whenever the acoustic recogniser changes.
 
     Public API used by front ends: `subscribe`, `start`, `stop`, `running`, `join`, `run_until`,
     `status`, `audio_rate`, `record_window`, `take_picture`, `latest_scores`, `retrain`,
@@ -142,6 +146,7 @@ class Engine:
         model_path: str | Path | None = None,
         fresh_methods: Mapping[str, str] | None = None,
         confidence_threshold: float | None = None,
+        smoother: SceneSmoother | None = None,
     ) -> None:
         self.audio = audio
         self.camera = camera
@@ -160,6 +165,7 @@ class Engine:
         self.fresh_methods = dict(fresh_methods or FRESH_METHODS)
         self.retrain_needed = False
         self.confidence_threshold = confidence_threshold
+        self.smoother = smoother
 
         self._subscribers: list[Subscriber] = []
         self._subscribers_lock = threading.Lock()
@@ -169,6 +175,7 @@ class Engine:
         self._update_lock = threading.Lock()  # one model update (retrain, fold-in) at a time
         self._camera_lock = threading.Lock()
         self._stop = threading.Event()
+        self._life = threading.Lock()  # start and stop, one at a time
         self._finished = threading.Event()
         self._thread: threading.Thread | None = None
         self._arm_pool: ThreadPoolExecutor | None = None
@@ -243,6 +250,10 @@ class Engine:
 
     def start(self) -> None:
         """Open the senses (a missing one is reported, not fatal) and start the sense thread."""
+        with self._life:
+            self._start()
+
+    def _start(self) -> None:
         if self.running:
             return
         self._stop.clear()
@@ -259,8 +270,14 @@ class Engine:
         self._thread.start()
 
     def stop(self) -> None:
-        """Stop the sense thread, close the senses and wait for a pose being sent; idempotent."""
+        """Stop the sense thread, close the senses and wait for a pose being sent; idempotent.
+        A `start` still opening the senses on another thread (a front end quit at once) is
+        waited for: a device must not be closed while it is being opened."""
         self._stop.set()
+        with self._life:
+            self._stop_started()
+
+    def _stop_started(self) -> None:
         thread, self._thread = self._thread, None
         if thread is not None:
             thread.join()
@@ -446,16 +463,34 @@ class Engine:
         model_rate = getattr(acoustic, "rate", rate)
         X = acoustic.featurize(resample(window, rate, model_rate)[None, :])
         scene, confidence, scores = _predict(acoustic, X)
+        unit = acoustic.confidence_unit
+        if self.smoother is not None and unit == "%":
+            scene, confidence, scores = self._smoothed(scene, scores)
         with self._lock:
             self._scores["acoustic"] = scores
         known = scene != UNKNOWN
-        unit = acoustic.confidence_unit
         self._emit(AcousticPrediction(t, scene if known else None, confidence, scores, unit))
         if not known:
             self._ask_label("audio", _Kept("audio", window, rate), scores, t)
         with self._lock:
             events = self.fusion.on_acoustic(scene if known else None, confidence, t)
         self._handle(events)
+
+    def _forget_windows(self) -> None:
+        """A new acoustic model: what the old one believed about past windows means nothing."""
+        if self.smoother is not None:
+            self.smoother.reset()
+
+    def _smoothed(
+        self, scene: str, scores: dict[str, float]
+    ) -> tuple[str, float, dict[str, float]]:
+        """The window's judgement through the forward filter: (scene or UNKNOWN, confidence in
+        percent, {scene: probability}) of the belief after this window."""
+        assert self.smoother is not None
+        with self._lock:
+            belief = self.smoother.update(scores if scene != UNKNOWN else {UNKNOWN: 1.0})
+        best = max(belief, key=lambda s: belief[s])
+        return best, 100.0 * belief[best], {s: p for s, p in belief.items() if s != UNKNOWN}
 
     def _look(self) -> None:
         t = self.clock()
@@ -733,7 +768,9 @@ class Engine:
             for failure in failures:
                 self._error(str(failure))
             with self._lock:
-                self.acoustic = new_acoustic or self.acoustic
+                if new_acoustic is not None:
+                    self.acoustic = new_acoustic
+                    self._forget_windows()
                 self.visual = new_visual or self.visual
                 self.retrain_needed = False
             self._save_models()
@@ -828,6 +865,7 @@ class Engine:
             with self._lock:
                 if kept.sense == "audio":
                     self.acoustic = model
+                    self._forget_windows()
                 else:
                     self.visual = model
             self._save_models()
@@ -934,6 +972,7 @@ def build_demo_engine(
         fusion=fusion,
         clock=clock,
         library_root=library_root,
+        smoother=None if paper else steady(),
     )
     if arm:
         from servant_core.demo.arm import demo_learner, start_demo_arm
@@ -944,6 +983,11 @@ def build_demo_engine(
         engine.set_arm(link)
         engine.set_action_learner(pose_for_taught(demo_learner()))
     return engine
+
+
+def steady() -> SceneSmoother:
+    """The smoothing of live decisions: one odd window does not flip the scene, two do."""
+    return SceneSmoother(stay=STEADY_STAY, floor=STEADY_FLOOR)
 
 
 def fusion_config(settings: Any) -> FusionConfig:
@@ -1023,6 +1067,7 @@ def build_live_engine(
         library_root=settings.library_root,
         model_path=settings.model_path or settings.model,
         confidence_threshold=user.confidence_threshold,
+        smoother=steady(),
     )
     engine.connect_arm(user.serial_port, user.protocol, user.joints)
     learner_file = Path(settings.learner or default_learner_path())

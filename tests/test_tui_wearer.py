@@ -63,6 +63,7 @@ async def test_teach_two_scenes_retrain_arm_and_the_arm_takes_the_taught_pose(
     try:
         async with app.run_test(size=(120, 40)) as pilot:
             await wait(pilot, lambda: app.arm_state is not None and app.arm_state.connected, 20)
+            await wait(pilot, lambda: "microphone" in engine.status, 20)
             assert engine.status["microphone"].ok, engine.status["microphone"].message
             await pilot.press("t")
             await wait(pilot, lambda: isinstance(app.screen, TeachScreen), 10)
