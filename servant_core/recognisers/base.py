@@ -16,6 +16,7 @@ A recogniser is a scikit-learn-style estimator for one sense (`"audio"` or `"ima
 
 from __future__ import annotations
 
+import inspect
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -161,3 +162,15 @@ def scene_probabilities(
     total = probs.sum(axis=1, keepdims=True)
     uniform = np.full_like(probs, 1.0 / len(scenes))
     return np.where(total > 0, probs / np.where(total > 0, total, 1.0), uniform)
+
+
+def init_params(estimator: Any) -> dict[str, Any]:
+    """The estimator's parameters: each keyword of its `__init__`, as stored on it (sequences as
+    lists), the way scikit-learn's `get_params` reads them; what a model file keeps."""
+    names = [
+        name
+        for name, parameter in inspect.signature(type(estimator).__init__).parameters.items()
+        if parameter.kind is inspect.Parameter.KEYWORD_ONLY
+    ]
+    values = {name: getattr(estimator, name) for name in names}
+    return {name: list(v) if isinstance(v, tuple) else v for name, v in values.items()}

@@ -25,6 +25,7 @@ from servant_core.features.descriptors import (
     DEFAULT_SIZE,
     dense_descriptors,
 )
+from servant_core.recognisers.base import init_params
 from servant_core.recognisers.centroids import (
     CentroidRecogniser,
     codeword_histograms,
@@ -86,22 +87,7 @@ class BovwVisualRecogniser(CentroidRecogniser):
         self.random_state = random_state
 
     def params(self) -> dict[str, Any]:
-        return {
-            "size": self.size,
-            "cell": self.cell,
-            "n_bins": self.n_bins,
-            "n_words": self.n_words,
-            "n_colour_words": self.n_colour_words,
-            "colour_weight": self.colour_weight,
-            "clusters_per_scene": self.clusters_per_scene,
-            "spread_shrinkage": self.spread_shrinkage,
-            "discriminant": self.discriminant,
-            "whitened_novelty": self.whitened_novelty,
-            "max_codebook_blocks": self.max_codebook_blocks,
-            "reject_quantile": self.reject_quantile,
-            "reject_margin": self.reject_margin,
-            "random_state": self.random_state,
-        }
+        return init_params(self)
 
     def featurize(self, pictures: Sequence[np.ndarray]) -> np.ndarray:
         """(n, blocks, 4·n_bins + 3) dense block descriptors of BGR pictures."""

@@ -23,6 +23,7 @@ from servant_core.features.logmel import (
     DEFAULT_N_MELS,
     log_mel_frames,
 )
+from servant_core.recognisers.base import init_params
 from servant_core.recognisers.centroids import (
     CentroidRecogniser,
     codeword_histograms,
@@ -80,23 +81,7 @@ class CodebookAcousticRecogniser(CentroidRecogniser):
         self.random_state = random_state
 
     def params(self) -> dict[str, Any]:
-        return {
-            "rate": self.rate,
-            "window_seconds": self.window_seconds,
-            "n_mels": self.n_mels,
-            "frame_seconds": self.frame_seconds,
-            "fmin": self.fmin,
-            "fmax": self.fmax,
-            "n_codewords": self.n_codewords,
-            "clusters_per_scene": self.clusters_per_scene,
-            "spread_shrinkage": self.spread_shrinkage,
-            "discriminant": self.discriminant,
-            "whitened_novelty": self.whitened_novelty,
-            "max_codebook_frames": self.max_codebook_frames,
-            "reject_quantile": self.reject_quantile,
-            "reject_margin": self.reject_margin,
-            "random_state": self.random_state,
-        }
+        return init_params(self)
 
     def featurize(self, windows: np.ndarray) -> np.ndarray:
         """(n, frames, n_mels) level-free log-mel frames of (n, samples) windows at `rate`.

@@ -34,7 +34,7 @@ from sklearn.exceptions import NotFittedError
 from sklearn.linear_model import LogisticRegression
 
 from servant_core.features.logmel import DEFAULT_FMAX, DEFAULT_FMIN, log_mel_windows
-from servant_core.recognisers.base import PERCENT, UNKNOWN, check_training_scenes
+from servant_core.recognisers.base import PERCENT, UNKNOWN, check_training_scenes, init_params
 from servant_core.recognisers.centroids import SceneCentroids
 
 ENCODER_RATE = 22050
@@ -124,24 +124,7 @@ class KMeansEncoderAcousticRecogniser:
         self.random_state = random_state
 
     def params(self) -> dict[str, Any]:
-        return {
-            "rate": self.rate,
-            "window_seconds": self.window_seconds,
-            "n_mels": self.n_mels,
-            "frame_seconds": self.frame_seconds,
-            "fmin": self.fmin,
-            "fmax": self.fmax,
-            "n_codewords": self.n_codewords,
-            "n_codebooks": self.n_codebooks,
-            "C": self.C,
-            "augment": self.augment,
-            "crops": self.crops,
-            "eq_strength": self.eq_strength,
-            "max_codebook_frames": self.max_codebook_frames,
-            "reject_quantile": self.reject_quantile,
-            "reject_margin": self.reject_margin,
-            "random_state": self.random_state,
-        }
+        return init_params(self)
 
     def featurize(self, windows: np.ndarray) -> np.ndarray:
         """(n, frames, n_mels) level-free log-mel frames of (n, samples) windows at `rate`."""

@@ -24,6 +24,7 @@ from servant_core.recognisers.base import (
     ClusterLabels,
     check_training_scenes,
     cluster_spreads,
+    init_params,
     label_clusters,
     scene_probabilities,
 )
@@ -143,12 +144,7 @@ class PaperAcousticRecogniser(KMeansSceneRecogniser):
         return paper_fft_vectors(windows, self.rate)
 
     def params(self) -> dict[str, Any]:
-        return {
-            "rate": self.rate,
-            "window_seconds": self.window_seconds,
-            "random_state": self.random_state,
-            "n_init": self.n_init,
-        }
+        return init_params(self)
 
 
 class PaperVisualRecogniser(KMeansSceneRecogniser):
@@ -179,8 +175,4 @@ class PaperVisualRecogniser(KMeansSceneRecogniser):
         )
 
     def params(self) -> dict[str, Any]:
-        return {
-            "n_colours": self.n_colours,
-            "random_state": self.random_state,
-            "n_init": self.n_init,
-        }
+        return init_params(self)

@@ -43,7 +43,7 @@ from servant_core.features.descriptors import (
     hsv_histogram,
     square_thumbnail,
 )
-from servant_core.recognisers.base import PERCENT, UNKNOWN, check_training_scenes
+from servant_core.recognisers.base import PERCENT, UNKNOWN, check_training_scenes, init_params
 from servant_core.recognisers.centroids import SceneCentroids, spherical_kmeans
 
 C_GRID = (0.001, 0.003, 0.01, 0.03, 0.1)
@@ -140,22 +140,7 @@ class SoftBovwVisualRecogniser:
         self.random_state = random_state
 
     def params(self) -> dict[str, Any]:
-        return {
-            "size": self.size,
-            "cell": self.cell,
-            "n_bins": self.n_bins,
-            "n_words": self.n_words,
-            "n_colour_words": self.n_colour_words,
-            "grids": list(self.grids),
-            "hsv_bins": list(self.hsv_bins),
-            "mirror": self.mirror,
-            "C": self.C,
-            "cv_folds": self.cv_folds,
-            "max_codebook_blocks": self.max_codebook_blocks,
-            "reject_quantile": self.reject_quantile,
-            "reject_margin": self.reject_margin,
-            "random_state": self.random_state,
-        }
+        return init_params(self)
 
     # --- features --------------------------------------------------------------------------
 
