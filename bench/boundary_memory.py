@@ -14,7 +14,6 @@ import subprocess
 import sys
 import tempfile
 import time
-import zipfile
 import zlib
 from pathlib import Path
 
@@ -30,6 +29,7 @@ from servant_core.recognisers.paper import (  # noqa: E402
     PaperAcousticRecogniser,
     PaperVisualRecogniser,
 )
+from tests.cli_harness import zip_bomb  # noqa: E402
 
 
 def model(folder: Path) -> Path:
@@ -71,18 +71,6 @@ def cases(folder: Path) -> list[tuple[str, str, Path]]:
     return out
 
 
-def bomb(folder: Path) -> Path:
-    path = folder / "bomb.npz"
-    header = np.lib.format.header_data_from_array_1_0(np.zeros(0, np.uint8))
-    header["shape"] = (300 * 1024**2,)
-    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
-        with archive.open("visual/centres.npy", "w") as member:
-            np.lib.format.write_array_header_1_0(member, header)
-            for _ in range(300):
-                member.write(bytes(1 << 20))
-    return path
-
-
 def run(*argv: str) -> tuple[int, float, float, str]:
     start = time.perf_counter()
     with tempfile.TemporaryFile() as err:
@@ -111,7 +99,14 @@ def main() -> None:
         picture = folder / "p.png"
         cv2.imwrite(str(picture), np.full((8, 8, 3), 25, np.uint8))
         rows = [(what, good, option, path) for what, option, path in cases(folder)]
-        rows.append(("npz with a 300 MB member (0.3 MB file)", bomb(folder), "--image", picture))
+        rows.append(
+            (
+                "npz with a 300 MB member (0.3 MB file)",
+                zip_bomb(folder / "bomb.npz"),
+                "--image",
+                picture,
+            )
+        )
         print(f"{'case':42} {'file MB':>8} {'exit':>4} {'peak MB':>8} {'s':>6}  stderr")
         for what, model_path, option, path in rows:
             size = (path if model_path == good else model_path).stat().st_size / 1e6

@@ -936,12 +936,12 @@ def build_demo_engine(
 ) -> Engine:
     """The built-in demo: recognisers trained on freshly synthesised scenes (a couple of seconds),
     then the synthesised walk (see `servant_core.demo.scenes`). By default Servant at its best:
-    `codebook` and `bovw` with percentages, and the parallel fusion policy; `paper` gives the
-    paper's recognisers (eqs. 1 and 2) and its sequential 30 s / 20 s policy. With `arm`, an
-    emulated arm (`servant_core.demo.arm`), disarmed, that the engine closes when it stops. With
-    `library_root`, the demo's training scenes are written there as a scene library (the demo's
-    own throw-away space: see `servant_core.demo.space`), for the library screen and retrains.
-    `on_progress(done, total)` follows the training (the start-up's slow part).
+    the fresh methods (`FRESH_METHODS`) in percentages, smoothed, with the parallel policy;
+    `paper` gives the paper's recognisers (eqs. 1 and 2) and its sequential 30 s / 20 s policy.
+    With `arm`, an emulated arm (`servant_core.demo.arm`), disarmed, that the engine closes when
+    it stops. With `library_root`, the demo's training scenes are written there as a scene
+    library (the demo's own throw-away space: see `servant_core.demo.space`), for the library
+    screen and retrains. `on_progress(done, total)` follows the training (the slow part).
 
     `realtime=False` runs the walk as fast as possible on a `ManualClock` (pass your own to read
     it), so events — times included — are the same on every run: use `engine.run_until(t)` for a

@@ -17,8 +17,11 @@ import sys
 import tempfile
 import threading
 import time
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from servant_core.cli import main
 
@@ -109,3 +112,15 @@ def run_cli_subprocess(
             time.perf_counter() - start,
             usage.ru_maxrss / 1024,
         )
+
+
+def zip_bomb(path: Path) -> Path:
+    """A 0.3 MB `.npz` whose one member inflates to 300 MB: a model file not to read whole."""
+    header = np.lib.format.header_data_from_array_1_0(np.zeros(0, np.uint8))
+    header["shape"] = (300 * 1024**2,)
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
+        with archive.open("visual/centres.npy", "w") as member:
+            np.lib.format.write_array_header_1_0(member, header)
+            for _ in range(300):
+                member.write(bytes(1 << 20))
+    return path

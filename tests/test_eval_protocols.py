@@ -73,40 +73,15 @@ def test_eval_audio_trains_on_one_library_and_tests_on_another(libraries, capsys
 
 def test_eval_audio_fewshot_gives_one_row_per_k(libraries, capsys):
     a, _ = libraries
-    result = run_json(
-        capsys,
-        "eval",
-        "audio",
-        str(a),
-        "--protocol",
-        "fewshot",
-        "--shots",
-        "1,3",
-        "--method",
-        "codebook",
-        "--rate",
-        "8000",
-    )
+    argv = ["eval", "audio", str(a), "--protocol", "fewshot", "--shots", "1,3"]
+    argv += ["--method", "codebook", "--rate", "8000"]
+    result = run_json(capsys, *argv)
     assert result["protocol"] == "fewshot"
     assert [row["shots"] for row in result["rows"]] == [1, 3]
     # 6 recordings: k windows each train; the temporal test part (6 - 3 windows each) tests
     assert [row["n_train"] for row in result["rows"]] == [6, 18]
     assert [row["n_test"] for row in result["rows"]] == [18, 18]
-    main(
-        [
-            "eval",
-            "audio",
-            str(a),
-            "--protocol",
-            "fewshot",
-            "--shots",
-            "1,3",
-            "--method",
-            "codebook",
-            "--rate",
-            "8000",
-        ]
-    )
+    main(argv)
     lines = capsys.readouterr().out.splitlines()
     assert lines[1].startswith("k=1 ") and lines[2].startswith("k=3 ") and len(lines) == 3
 

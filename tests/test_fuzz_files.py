@@ -13,7 +13,6 @@ from __future__ import annotations
 import io
 import json
 import os
-import zipfile
 import zlib
 from pathlib import Path
 from typing import Any
@@ -27,7 +26,14 @@ from hypothesis import strategies as st
 
 from servant_core.audio import write_wav
 from servant_core.storage import atomic_save_npz
-from tests.cli_harness import ONE_GB, assert_clear, assert_refused, run_cli, run_cli_subprocess
+from tests.cli_harness import (
+    ONE_GB,
+    assert_clear,
+    assert_refused,
+    run_cli,
+    run_cli_subprocess,
+    zip_bomb,
+)
 from tests.conftest import tone
 
 SCALE = float(os.environ.get("SERVANT_FUZZ_SCALE", "1"))
@@ -422,17 +428,6 @@ def test_fuzz_train_keeps_the_old_model(ws: Workspace, kind, changes, length, sk
 # A sample in a child process: the real console script, its peak memory measured.
 
 
-def bomb(path: Path) -> Path:
-    header = np.lib.format.header_data_from_array_1_0(np.zeros(0, np.uint8))
-    header["shape"] = (300 * 1024**2,)
-    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
-        with archive.open("visual/centres.npy", "w") as member:
-            np.lib.format.write_array_header_1_0(member, header)
-            for _ in range(300):
-                member.write(bytes(1 << 20))
-    return path
-
-
 def test_worst_cases_in_a_child_process_stay_under_a_gigabyte(ws: Workspace) -> None:
     wav_1hz = bytearray(ws.audio[".wav"])
     wav_1hz[24:28] = (1).to_bytes(4, "little")
@@ -452,7 +447,9 @@ def test_worst_cases_in_a_child_process_stay_under_a_gigabyte(ws: Workspace) -> 
     ]
     outcomes = [run_cli_subprocess("predict", str(ws.model), option, str(p)) for option, p in cases]
     outcomes.append(
-        run_cli_subprocess("predict", str(bomb(ws.root / "bomb.npz")), "--image", str(ws.good_png))
+        run_cli_subprocess(
+            "predict", str(zip_bomb(ws.root / "bomb.npz")), "--image", str(ws.good_png)
+        )
     )
     for outcome in outcomes:
         assert_clear(outcome, seconds=60)
