@@ -191,6 +191,7 @@ class Engine:
         self._audio_retry_at = 0.0
         self._camera_ok = False
         self._camera_retry_at = 0.0
+        self._arm_checked_at = 0.0
         self._next_window_end = 0
         self._next_spectrum_at = 0
         self._scores: dict[str, dict[str, float]] = {"acoustic": {}, "visual": {}}
@@ -498,6 +499,7 @@ class Engine:
             events = self.fusion.tick(t)
             wants = self.camera is not None and self.fusion.wants_picture(t)
         self._handle(events)
+        self._check_arm(t)
         if not wants:
             return
         with self._camera_lock:
@@ -676,6 +678,23 @@ class Engine:
             self._move(link, dict(pose))
         else:
             pool.submit(self._move, link, dict(pose))
+
+    def _check_arm(self, t: float) -> None:
+        """Every `reopen_seconds`, ask an armed arm where it is (on the arm's thread): a
+        controller unplugged while the arm stands still would otherwise stay "ARMED" on screen
+        until the next move. A lost link disarms itself; its reason becomes the servo's status."""
+        link, pool = self._link, self._arm_pool
+        if link is None or pool is None or not link.armed or t < self._arm_checked_at:
+            return
+        self._arm_checked_at = t + self.reopen_seconds
+        pool.submit(self._ask_arm, link)
+
+    def _ask_arm(self, link: Any) -> None:
+        try:
+            link.read_positions()
+        except ServantError as error:
+            self._report("servo", False, str(error))
+            self._emit_arm_state()
 
     def _move(self, link: Any, pose: dict[str, float]) -> None:
         # On its own thread: a rate-limited move takes seconds and must not hold up the senses.

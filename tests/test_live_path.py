@@ -282,3 +282,28 @@ def test_a_retrain_reports_its_progress_over_sound_then_pictures(tmp_path):
     Engine().retrain(library, on_progress=lambda done, total: seen.append((done, total)))
     total = len(library.recordings) + len(library.pictures)
     assert seen == [(k, total) for k in range(1, total + 1)]
+
+
+def test_an_armed_arm_whose_controller_vanishes_while_still_is_shown_disarmed(emulator):
+    """Nothing moved, so nothing wrote to the port: the engine's check every `reopen_seconds`
+    finds the controller gone, and the arm is said to be disarmed, with the reason."""
+    import time as clock
+
+    emu, port = emulator
+    save_settings(Settings(serial_port=port))
+    engine = build_run_engine(build_parser().parse_args(["run", "--no-mic", "--no-camera"]))
+    engine.reopen_seconds = 0.2
+    events: list = []
+    engine.subscribe(events.append)
+    engine.arm()
+    engine.start()
+    try:
+        emu.stop()
+        deadline = clock.monotonic() + 15
+        while engine._link.armed and clock.monotonic() < deadline:
+            clock.sleep(0.05)
+        assert not engine._link.armed
+        assert not engine.status["servo"].ok and "lost" in engine.status["servo"].message
+        assert any(isinstance(e, ArmState) and not e.armed for e in events)
+    finally:
+        engine.stop()
