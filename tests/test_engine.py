@@ -171,10 +171,15 @@ def test_a_first_retrain_without_recognisers_fits_fresh_ones_and_saves_them(libr
 
     # and the engine runs on them: its decisions average two percentages, and say so
     clock = ManualClock()
-    engine.audio = replay_recordings(library.recordings, DEMO_RATE, realtime=False, clock=clock)
-    engine.camera = PictureReplay(library.pictures, scene_of=lambda: engine.audio.current_label)
-    engine.clock = clock
-    engine.fusion = SequentialFusion(FusionConfig(acoustic_window_s=10.0))
+    audio = replay_recordings(library.recordings, DEMO_RATE, realtime=False, clock=clock)
+    engine = Engine(
+        audio=audio,
+        camera=PictureReplay(library.pictures, scene_of=lambda: audio.current_label),
+        acoustic=engine.acoustic,
+        visual=engine.visual,
+        clock=clock,
+        fusion=SequentialFusion(FusionConfig(acoustic_window_s=10.0)),
+    )
     events = collect(engine)
     engine.run_until(1e9)
     decided = [e for e in events if isinstance(e, Decision) and e.scene]
@@ -480,7 +485,7 @@ def test_the_demo_arm_holds_the_cup_in_the_cafe_once_armed():
 
     engine = build_demo_engine(seed=0, realtime=False)
     events = collect(engine)
-    link = engine._link
+    link = engine.link
     assert link is not None and not link.armed
     engine.arm()
     engine.run_until(12.0)  # the first CoffeeScene detected comes at ~9 s

@@ -125,12 +125,12 @@ def test_the_arm_of_the_settings_is_attached_disarmed_and_moves_only_when_armed(
     engine.subscribe(events.append)
     try:
         assert engine.status["servo"].ok, engine.status["servo"].message
-        assert engine._link is not None and not engine._link.armed
+        assert engine.link is not None and not engine.link.armed
         engine.arm()
         assert any(isinstance(e, ArmState) and e.armed and e.connected for e in events)
     finally:
         engine.stop()
-    assert engine._link is None  # the engine closed the link it opened
+    assert engine.link is None  # the engine closed the link it opened
 
 
 def test_servant_run_with_arm_but_no_arm_says_so_in_one_line():
@@ -300,9 +300,9 @@ def test_an_armed_arm_whose_controller_vanishes_while_still_is_shown_disarmed(em
     try:
         emu.stop()
         deadline = clock.monotonic() + 15
-        while engine._link.armed and clock.monotonic() < deadline:
+        while engine.link.armed and clock.monotonic() < deadline:
             clock.sleep(0.05)
-        assert not engine._link.armed
+        assert not engine.link.armed
         assert not engine.status["servo"].ok and "lost" in engine.status["servo"].message
         assert any(isinstance(e, ArmState) and not e.armed for e in events)
     finally:

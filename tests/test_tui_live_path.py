@@ -47,8 +47,8 @@ async def test_the_arm_of_the_settings_can_be_armed_with_a(tmp_path):
             assert app.check_action("toggle_arm", ()) is True
             await pilot.press("a")
             await settle(pilot, lambda: app.arm_state.armed)
-            assert engine._link.armed
-        assert engine._link is None  # quitting closed the port
+            assert engine.link.armed
+        assert engine.link is None  # quitting closed the port
     finally:
         emulator.stop()
 
@@ -72,10 +72,10 @@ async def test_poses_trained_in_teach_mode_are_used_by_the_engine_at_once(tmp_pa
     ]
     learner = ActionLearner(max_iter=200).fit(records)
     async with app.run_test(size=(100, 30)) as pilot:
-        assert engine._pose_for is None
+        assert engine.pose_for is None
         app.live.post_message(TrainingDone(learner))
-        await settle(pilot, lambda: engine._pose_for is not None)
-        assert engine._pose_for("b", {}, 99.0)["shoulder"] == learner.pose_for("b")["shoulder"]
+        await settle(pilot, lambda: engine.pose_for is not None)
+        assert engine.pose_for("b", {}, 99.0)["shoulder"] == learner.pose_for("b")["shoulder"]
 
 
 async def test_an_unknown_place_waits_for_the_live_screen_and_does_not_nag(tmp_path):

@@ -1,0 +1,181 @@
+"""The arm's part of the engine: the servo link, the taught poses, and moves off the senses' thread.
+
+The link (`servant_core.servo.link`) enforces the joint limits and the speed limit and refuses to
+move unless armed; this part decides *whether* to ask it: only an armed arm, only a decided scene
+with a pose taught for it, only above the user's confidence threshold. A rate-limited move takes
+seconds, so moves and heartbeats run on the arm's own single thread.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+from servant_core.engine.bus import EventBus
+from servant_core.errors import ServantError
+from servant_core.events import ArmState, Notice
+
+Pose = Mapping[str, float]
+PoseFor = Callable[[str, dict[str, dict[str, float]], float], Pose | None]
+
+NO_POSE = "arm: no pose taught yet, so it stays put; teach one in teach mode (key t), then Train"
+
+
+class ArmControl:
+    """The attached link (or None, with the reason as the servo's status) and what moves it."""
+
+    def __init__(self, bus: EventBus, reopen_seconds: float) -> None:
+        self.bus = bus
+        self.reopen_seconds = reopen_seconds
+        self.link: Any = None
+        self.pose_for: PoseFor | None = None
+        self._spec: tuple[Any, ...] | None = None  # (port, protocol, joints) of `connect`
+        self._pool: ThreadPoolExecutor | None = None
+        self._checked_at = 0.0
+
+    # --- life cycle ---------------------------------------------------------------------------
+
+    def start(self) -> None:
+        """Start the arm's thread (moves, heartbeats)."""
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="servant-arm")
+
+    def stop(self) -> None:
+        """Wait for a pose being sent, then disarm and close the link `connect` opened."""
+        pool, self._pool = self._pool, None
+        if pool is not None:
+            pool.shutdown(wait=True)
+        self.close()
+
+    # --- attaching ----------------------------------------------------------------------------
+
+    def set_arm(self, link: Any, why_none: str = "servo: no arm attached") -> None:
+        """Attach a link, or None to detach it (`why_none` says why). Not closed by the engine."""
+        self.link = link
+        if link is None:
+            self.bus.report("servo", False, why_none)
+        else:
+            name = getattr(link, "port", None) or "link"
+            self.bus.report("servo", True, f"servo: {name} attached")
+        self.emit_state()
+
+    def connect(self, port: str | None, protocol: str, joints: Sequence[Any]) -> None:
+        """Open the arm the settings name (disarmed) and attach it, closing the one this method
+        attached before. A missing port or a silent controller is reported as the servo's status,
+        never raised. Asking again for the same port, protocol and joints keeps the link."""
+        from servant_core.servo.link import ServoLink
+
+        spec = (port, protocol, tuple(joints))
+        if spec == self._spec and self.link is not None:
+            return
+        self.close()
+        if not port:
+            self.set_arm(None, "servo: no serial port set; choose the arm's port in Settings (s)")
+            return
+        try:
+            link = ServoLink.open(port, protocol, list(joints))
+        except ServantError as error:
+            self.set_arm(None, str(error))
+            return
+        self._spec = spec
+        self.set_arm(link)
+
+    @property
+    def connected_here(self) -> bool:
+        """True if the link (or its absence) came from `connect`, not from `set_arm`."""
+        return self.link is None or self._spec is not None
+
+    def close(self) -> None:
+        """Disarm and close the link `connect` opened, if any."""
+        if self._spec is None:
+            return
+        link, self.link, self._spec = self.link, None, None
+        if link is not None:
+            try:
+                link.disarm()
+            finally:
+                link.close()
+
+    # --- arming -------------------------------------------------------------------------------
+
+    def arm(self) -> None:
+        """Allow the arm to move; ServantError if no arm is attached."""
+        if self.link is None:
+            raise ServantError("servo: no arm attached; connect one with `servant servo` first")
+        self.link.arm()
+        self.emit_state()
+
+    def disarm(self) -> None:
+        """Forbid the arm to move; does nothing when no arm is attached (safe to call always)."""
+        if self.link is not None:
+            self.link.disarm()
+            self.emit_state()
+
+    def emit_state(self) -> None:
+        state = self.link.status() if self.link is not None else None
+        if isinstance(state, ArmState):
+            # the link stamps its own clock; events carry the engine's
+            self.bus.emit(dataclasses.replace(state, t=self.bus.clock()))
+
+    # --- acting -------------------------------------------------------------------------------
+
+    def act(self, scene: str, scores: dict[str, dict[str, float]], threshold: float | None) -> None:
+        """Move to the pose taught for a decided `scene`, if armed and sure enough: `scores` are
+        the senses' latest {sense: {scene: probability}}; the less sure sense must give the scene
+        at least `threshold` percent."""
+        link, pose_for, pool = self.link, self.pose_for, self._pool
+        if link is None or not link.armed:
+            return
+        if pose_for is None:
+            self.bus.emit(Notice(self.bus.clock(), NO_POSE))
+            return
+        confidence = 100.0 * min(scores[sense].get(scene, 0.0) for sense in ("acoustic", "visual"))
+        if threshold is not None and confidence < threshold:
+            self.bus.emit(
+                Notice(
+                    self.bus.clock(),
+                    f"arm stays put: {scene} is only {confidence:.0f} % sure, under the "
+                    f"{threshold:g} % threshold (Settings)",
+                )
+            )
+            return
+        try:
+            pose = pose_for(scene, scores, confidence)
+        except ServantError as error:
+            self.bus.error(str(error))
+            return
+        if pose is None:
+            return
+        if pool is None:  # run_until: no thread pool, send on this thread
+            self._move(link, dict(pose))
+        else:
+            pool.submit(self._move, link, dict(pose))
+
+    def check(self, t: float) -> None:
+        """Every `reopen_seconds`, ask an armed arm where it is (on the arm's thread): a
+        controller unplugged while the arm stands still would otherwise stay "ARMED" on screen
+        until the next move. A lost link disarms itself; its reason becomes the servo's status."""
+        link, pool = self.link, self._pool
+        if link is None or pool is None or not link.armed or t < self._checked_at:
+            return
+        self._checked_at = t + self.reopen_seconds
+        pool.submit(self._ask, link)
+
+    def _ask(self, link: Any) -> None:
+        try:
+            link.read_positions()
+        except ServantError as error:
+            self.bus.report("servo", False, str(error))
+            self.emit_state()
+
+    def _move(self, link: Any, pose: dict[str, float]) -> None:
+        # On its own thread: a rate-limited move takes seconds and must not hold up the senses.
+        try:
+            if link.armed:
+                link.move_to(pose)
+        except ServantError as error:
+            self.bus.report("servo", False, str(error))
+        except Exception as exc:
+            self.bus.report("servo", False, f"servo: move failed ({type(exc).__name__}: {exc})")
+        self.emit_state()

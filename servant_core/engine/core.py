@@ -1,0 +1,610 @@
+"""The engine: owns the senses, the recognisers, the fusion policy and the arm; emits events.
+
+One sense thread does the work. It takes audio blocks into a ring (`loop.Hearing`), which cuts
+consecutive windows (5 s) that are judged here, and — between blocks — lets the fusion policy
+tick and grabs a picture (`loop.Sight`) whenever the policy wants one. Doing it all on one thread
+keeps the order of events a pure function of the input: a demo run on a `ManualClock` gives the
+same events on every machine. (The microphone's PortAudio callback runs on PortAudio's own thread
+and only queues blocks.)
+
+Its parts, by role: `bus` (subscribers, statuses, errors said once), `loop` (the devices side of
+the sense loop), `learning` (retrain, fold-in, saving), `arm` (the link, poses, moves), and
+`factories` (the demo's engine and the live one).
+
+Subscribers are called on the sense thread (or on the thread calling `label_unknown`, `retrain`,
+`arm`…): they must be quick and must not call back into `start`/`stop`. A front end posts the
+event to its own loop.
+
+Faults (a device gone, no frame, a corrupt replay file, a prediction that fails) are reported once
+as `DeviceStatus(ok=False)` or `ErrorEvent`, and the engine carries on with the other senses,
+reopening a failed device every `reopen_seconds`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import threading
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from servant_core.audio import DEFAULT_WINDOW_SECONDS, resample
+from servant_core.capture.source import AudioSource, FrameSource, ManualClock, MonotonicClock
+from servant_core.engine import learning
+from servant_core.engine.arm import ArmControl, PoseFor
+from servant_core.engine.bus import EventBus, Subscriber
+from servant_core.engine.learning import Kept, Unknowns, progress_part
+from servant_core.engine.loop import SPECTRUM_FPS, SPECTRUM_SIZE, Hearing, Sight
+from servant_core.errors import ServantError
+from servant_core.events import (
+    AcousticPrediction,
+    Decision,
+    DeviceStatus,
+    Notice,
+    Palette,
+    UnknownScene,
+    VisualPrediction,
+)
+from servant_core.features.palette import dominant_colours
+from servant_core.fusion import FusionConfig, FusionPolicy, SequentialFusion
+from servant_core.fusion.smoothing import SceneSmoother
+from servant_core.library import SceneLibrary
+from servant_core.recognisers import FRESH_METHODS, UNKNOWN, Recogniser
+from servant_core.storage import data_dir
+
+log = logging.getLogger(__name__)
+
+NO_MODEL = (
+    "no model yet: nothing can be recognised until two scenes are taught (teach mode, key t: "
+    "5 s of sound and a few pictures of each, then Retrain) or a model is given "
+    "(`servant train LIBRARY -o model.npz`, then --model)"
+)
+
+
+class Engine:
+    """Senses → recognisers → fusion → decisions (→ poses → arm), as events to subscribers.
+
+    Parameters
+    - `audio`, `camera`: an `AudioSource` / `FrameSource` (see `servant_core.capture.source`),
+      or None for a sense that is absent.
+    - `acoustic`, `visual`: fitted recognisers (see `servant_core.recognisers.base`), or None.
+    - `fusion`: a `FusionPolicy` (default: the paper's `SequentialFusion`).
+    - `clock`: the engine's time in seconds (default: monotonic seconds since construction).
+    - `window_seconds`: the window the acoustic recogniser judges (default: its own, else 5 s).
+    - `library_root`: where `label_unknown` writes (default `data_dir()/"library"`).
+    - `fresh_methods`: {sense: method} a retrain fits for a sense that has no recogniser yet
+      (a first start, before anything was taught); default `FRESH_METHODS`.
+    - `model_path`: the model file the recognisers came from. After a retrain or a fold-in the
+      updated recognisers are saved back to it (atomically), so what the user taught survives a
+      restart; None (the demo, or no model) keeps updates in memory only.
+    - `confidence_threshold`: percent; the arm does not act on a decision whose scene the less
+      sure sense gives less than this (None: no threshold of the engine's own).
+    - `smoother`: a `SceneSmoother` that filters consecutive windows' probabilities, so that one
+      odd window does not flip the scene (recognisers in percent only; None: each window alone).
+      It starts afresh whenever the acoustic recogniser changes.
+
+    Public API used by front ends: `subscribe`, `start`, `stop`, `running`, `join`, `run_until`,
+    `status`, `audio_rate`, `record_window`, `take_picture`, `latest_scores`, `retrain`,
+    `retrain_needed`, `label_unknown`, `set_arm`, `connect_arm`, `arm`, `disarm`, `link`,
+    `pose_for`, `set_action_learner`, `apply_settings`, `note`.
+    """
+
+    def __init__(
+        self,
+        *,
+        audio: AudioSource | None = None,
+        camera: FrameSource | None = None,
+        acoustic: Recogniser | None = None,
+        visual: Recogniser | None = None,
+        fusion: FusionPolicy | None = None,
+        clock: Callable[[], float] | None = None,
+        window_seconds: float | None = None,
+        spectrum_fps: float = SPECTRUM_FPS,
+        spectrum_size: int = SPECTRUM_SIZE,
+        reopen_seconds: float = 2.0,
+        library_root: str | Path | None = None,
+        model_path: str | Path | None = None,
+        fresh_methods: Mapping[str, str] | None = None,
+        confidence_threshold: float | None = None,
+        smoother: SceneSmoother | None = None,
+    ) -> None:
+        self.audio = audio
+        self.camera = camera
+        self.acoustic = acoustic
+        self.visual = visual
+        self.fusion: FusionPolicy = fusion if fusion is not None else SequentialFusion()
+        self.clock: Callable[[], float] = clock or MonotonicClock()
+        self.window_seconds = float(
+            window_seconds or getattr(acoustic, "window_seconds", None) or DEFAULT_WINDOW_SECONDS
+        )
+        self.reopen_seconds = reopen_seconds
+        self.library_root = Path(library_root) if library_root else None
+        self.model_path = Path(model_path) if model_path else None
+        self.fresh_methods = dict(fresh_methods or FRESH_METHODS)
+        self.retrain_needed = False
+        self.confidence_threshold = confidence_threshold
+        self.smoother = smoother
+
+        self._bus = EventBus(self.clock)
+        self._arm = ArmControl(self._bus, reopen_seconds)
+        self._hearing = (
+            Hearing(
+                audio,
+                self._bus,
+                lambda window, rate: self._guarded(
+                    "acoustic prediction", self._on_window, window, rate
+                ),
+                window_seconds=self.window_seconds,
+                reopen_seconds=reopen_seconds,
+                spectrum_fps=spectrum_fps,
+                spectrum_size=spectrum_size,
+            )
+            if audio is not None
+            else None
+        )
+        self._sight = Sight(camera, self._bus, reopen_seconds=reopen_seconds) if camera else None
+        self._lock = threading.RLock()  # models, fusion, scores
+        self._update_lock = threading.Lock()  # one model update (retrain, fold-in) at a time
+        self._stop = threading.Event()
+        self._life = threading.Lock()  # start and stop, one at a time
+        self._finished = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._cleanups: list[Callable[[], None]] = []
+        self._notes: list[str] = []  # said to every subscriber when the senses open
+        self._opened = False
+        self._scores: dict[str, dict[str, float]] = {"acoustic": {}, "visual": {}}
+        self._unknowns = Unknowns()
+
+    # --- subscribers and status -------------------------------------------------------------
+
+    def subscribe(self, callback: Subscriber) -> Callable[[], None]:
+        """Call `callback(event)` for every event from now on; returns the way to unsubscribe."""
+        return self._bus.subscribe(callback)
+
+    @property
+    def status(self) -> dict[str, DeviceStatus]:
+        """The latest status of each device ("microphone", "camera", "servo")."""
+        return self._bus.status
+
+    def _emit(self, event: Any) -> None:
+        self._bus.emit(event)
+
+    def _error(self, message: str) -> None:
+        self._bus.error(message)
+
+    def note(self, message: str) -> None:
+        """Say `message` as a `Notice` now and again whenever the senses open: what a front end
+        that subscribes later (a first start's "no model yet") must still hear."""
+        self._notes.append(message)
+        self._emit(Notice(self.clock(), message))
+
+    # --- life cycle ---------------------------------------------------------------------------
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def start(self) -> None:
+        """Open the senses (a missing one is reported, not fatal) and start the sense thread."""
+        with self._life:
+            self._start()
+
+    def _start(self) -> None:
+        if self.running:
+            return
+        self._stop.clear()
+        self._finished.clear()
+        # An arm attached before anyone subscribed (the demo's) is said again to those who now
+        # listen, or a front end would never learn that there is an arm to arm.
+        servo = self._bus.status.get("servo")
+        if servo is not None:
+            self._emit(servo)
+        self._arm.emit_state()
+        self._open_senses()
+        self._arm.start()
+        self._thread = threading.Thread(target=self._run, name="servant-senses", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop the sense thread, close the senses and wait for a pose being sent; idempotent.
+        A `start` still opening the senses on another thread (a front end quit at once) is
+        waited for: a device must not be closed while it is being opened."""
+        self._stop.set()
+        with self._life:
+            self._stop_started()
+
+    def _stop_started(self) -> None:
+        thread, self._thread = self._thread, None
+        if thread is not None:
+            thread.join()
+        self._close_senses()
+        self._arm.stop()
+        while self._cleanups:
+            self._cleanups.pop()()
+
+    def add_cleanup(self, close: Callable[[], None]) -> None:
+        """Run `close` when the engine stops (last added, first run): what it owns, it closes."""
+        self._cleanups.append(close)
+
+    def join(self, timeout: float | None = None) -> bool:
+        """Wait until a finite audio source (a replay) has been played out; False on timeout."""
+        return self._finished.wait(timeout)
+
+    def run_until(self, t: float) -> None:
+        """Run the senses on the caller's thread until the engine's clock reaches `t` (or the audio
+        runs out). With a `ManualClock` this is fully deterministic; no thread is started."""
+        if self.running:
+            raise RuntimeError("run_until is for an engine that was not started")
+        if not self._opened:
+            self._open_senses()
+        while self.clock() < t and not self._finished.is_set():
+            self._step()
+
+    def __enter__(self) -> Engine:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def _open_senses(self) -> None:
+        self._opened = True
+        with self._lock:
+            untrained = self.acoustic is None and self.visual is None
+        for message in [*self._notes, *([NO_MODEL] if untrained else [])]:
+            self._emit(Notice(self.clock(), message))
+        self._emit(self.fusion.state(self.clock()))
+        if self._hearing is not None:
+            self._hearing.open()
+        if self._sight is not None:
+            self._sight.open()
+
+    def _close_senses(self) -> None:
+        self._opened = False
+        if self._hearing is not None:
+            self._hearing.close()
+        if self._sight is not None:
+            self._sight.close()
+
+    # --- the sense thread ---------------------------------------------------------------------
+
+    def _run(self) -> None:
+        try:
+            while not self._stop.is_set() and not self._finished.is_set():
+                self._step()
+        except Exception as exc:  # a bug must show, not silently stop the senses
+            log.exception("the sense thread failed")
+            self._error(f"engine: the sense thread stopped ({type(exc).__name__}: {exc})")
+
+    def _step(self, timeout: float = 0.05) -> None:
+        """One turn: take an audio block if one comes within `timeout`, then let fusion look."""
+        hearing = self._hearing
+        if hearing is not None and hearing.ok:
+            if not hearing.listen(timeout):
+                self._finished.set()
+                return
+        else:
+            if isinstance(self.clock, ManualClock):
+                # Nothing moves a manual clock but the audio: without audio there is no time.
+                self._finished.set()
+                return
+            self._stop.wait(timeout)
+            if hearing is not None:
+                hearing.reopen_if_due(self.clock())
+        self._look()
+
+    def _guarded(self, what: str, fn: Callable[..., None], *args: Any) -> None:
+        try:
+            fn(*args)
+        except ServantError as error:
+            self._error(str(error))
+        except Exception as exc:  # e.g. a model trained on another window length: say it, go on
+            log.debug("%s failed", what, exc_info=True)
+            self._error(f"{what} failed: {type(exc).__name__}: {exc}")
+
+    def _on_window(self, window: np.ndarray, rate: int) -> None:
+        with self._lock:
+            acoustic = self.acoustic
+        if acoustic is None:
+            return
+        t = self.clock()
+        model_rate = getattr(acoustic, "rate", rate)
+        X = acoustic.featurize(resample(window, rate, model_rate)[None, :])
+        scene, confidence, scores = _predict(acoustic, X)
+        unit = acoustic.confidence_unit
+        if self.smoother is not None and unit == "%":
+            scene, confidence, scores = self._smoothed(scene, scores)
+        with self._lock:
+            self._scores["acoustic"] = scores
+        known = scene != UNKNOWN
+        self._emit(AcousticPrediction(t, scene if known else None, confidence, scores, unit))
+        if not known:
+            self._ask_label(Kept("audio", window, rate), scores, t)
+        with self._lock:
+            events = self.fusion.on_acoustic(scene if known else None, confidence, t)
+        self._handle(events)
+
+    def _forget_windows(self) -> None:
+        """A new acoustic model: what the old one believed about past windows means nothing."""
+        if self.smoother is not None:
+            self.smoother.reset()
+
+    def _smoothed(
+        self, scene: str, scores: dict[str, float]
+    ) -> tuple[str, float, dict[str, float]]:
+        """The window's judgement through the forward filter: (scene or UNKNOWN, confidence in
+        percent, {scene: probability}) of the belief after this window."""
+        assert self.smoother is not None
+        with self._lock:
+            belief = self.smoother.update(scores if scene != UNKNOWN else {UNKNOWN: 1.0})
+        best = max(belief, key=lambda s: belief[s])
+        return best, 100.0 * belief[best], {s: p for s, p in belief.items() if s != UNKNOWN}
+
+    def _look(self) -> None:
+        t = self.clock()
+        with self._lock:
+            events = self.fusion.tick(t)
+            wants = self._sight is not None and self.fusion.wants_picture(t)
+        self._handle(events)
+        self._arm.check(t)
+        if not wants:
+            return
+        assert self._sight is not None
+        frame = self._sight.grab(t)
+        if frame is not None:
+            self._guarded("visual prediction", self._on_picture, frame, t)
+
+    def _on_picture(self, frame: np.ndarray, t: float) -> None:
+        with self._lock:
+            visual = self.visual
+        if visual is None:
+            self._emit(Palette(t, *dominant_colours(frame)))
+            return
+        X = visual.featurize([frame])
+        scene, confidence, scores = _predict(visual, X)
+        known = scene != UNKNOWN
+        with self._lock:
+            self._scores["visual"] = scores
+            events = self.fusion.on_visual(scene if known else None, confidence, t)
+        unit = visual.confidence_unit
+        self._emit(VisualPrediction(t, scene if known else None, confidence, scores, unit))
+        # The decision (and the arm's move) first; the palette is only for show.
+        self._handle(events)
+        matched = visual.matched_palette(X)[0] if hasattr(visual, "matched_palette") else None
+        self._emit(Palette(t, *dominant_colours(frame), scene if known else None, matched))
+        if not known:
+            self._ask_label(Kept("image", frame), scores, t)
+
+    def _handle(self, events: list[Any]) -> None:
+        for event in events:
+            if isinstance(event, Decision) and event.scene is not None:
+                with self._lock:
+                    unit = decision_unit(self.acoustic, self.visual)
+                event = dataclasses.replace(event, confidence_unit=unit)
+            self._emit(event)
+            if isinstance(event, Decision) and event.scene is not None:
+                self._arm.act(event.scene, self.latest_scores(), self.confidence_threshold)
+
+    # --- the arm (see `arm.ArmControl`) -------------------------------------------------------
+
+    @property
+    def link(self) -> Any:
+        """The attached servo link, or None."""
+        return self._arm.link
+
+    @property
+    def pose_for(self) -> PoseFor | None:
+        """What turns a decided scene into a pose (`set_action_learner`), or None."""
+        return self._arm.pose_for
+
+    def set_action_learner(self, pose_for: PoseFor | None) -> None:
+        """Attach what turns a detected scene into a pose: a callable
+        (scene, scores, confidence) → {joint: degrees} or None, e.g. `ActionLearner.pose_for`.
+        `scores` are the latest per-sense scene scores; `confidence` (percent) is the smaller of
+        the two senses' probabilities for the scene. None detaches it."""
+        self._arm.pose_for = pose_for
+
+    def set_arm(self, link: Any, why_none: str = "servo: no arm attached") -> None:
+        """Attach a servo link (`servant_core.servo.link`: `.arm()`, `.disarm()`, `.armed`,
+        `.move_to(pose)`, `.status()`), or None to detach it (`why_none` says why). The link
+        enforces limits and rate. A link attached here is not closed by the engine."""
+        self._arm.set_arm(link, why_none)
+
+    def connect_arm(self, port: str | None, protocol: str, joints: Sequence[Any]) -> None:
+        """Open the arm the settings name (disarmed) and attach it, closing the one this method
+        attached before; the engine closes it when it stops. A missing port or a controller that
+        does not answer is reported as the servo's status, never raised: the senses go on.
+        Asking again for the same port, protocol and joints keeps the link as it is."""
+        self._arm.connect(port, protocol, joints)
+
+    def arm(self) -> None:
+        """Allow the arm to move (delegates to the link); ServantError if no arm is attached."""
+        self._arm.arm()
+
+    def disarm(self) -> None:
+        """Forbid the arm to move; does nothing when no arm is attached (safe to call always)."""
+        self._arm.disarm()
+
+    def apply_settings(self, settings: Any) -> None:
+        """Use the user's settings (`servant_core.settings.Settings`) from now on: the fusion
+        windows (when they changed, the current window starts afresh), the confidence threshold,
+        and the arm's port, protocol and joints (reconnected only when they changed; an arm
+        attached with `set_arm`, like the demo's, stays). Call it off the UI thread: a
+        controller that does not answer takes up to a second to say so."""
+        config = fusion_config(settings)
+        with self._lock:
+            # the policies of servant_core.fusion; unchanged windows keep the current one open
+            if getattr(self.fusion, "config", config) != config:
+                policy: Any = type(self.fusion)
+                self.fusion = policy(config)
+            self.confidence_threshold = float(settings.confidence_threshold)
+            state = self.fusion.state(self.clock())
+        self._emit(state)
+        if self._arm.connected_here:
+            self.connect_arm(settings.serial_port, settings.protocol, settings.joints)
+
+    # --- what the front end asks for ----------------------------------------------------------
+
+    @property
+    def audio_rate(self) -> int:
+        """The rate of the audio source (what `record_window` returns); 0 without audio."""
+        return self._hearing.rate if self._hearing is not None else 0
+
+    def record_window(
+        self, seconds: float = DEFAULT_WINDOW_SECONDS, timeout: float | None = None
+    ) -> np.ndarray:
+        """Record the next `seconds` of audio from now (blocks until they have arrived).
+
+        Returns mono float32 at `audio_rate`. Raises ServantError without a working audio source
+        or if the audio does not arrive within `timeout` (default: twice `seconds` plus 2 s).
+        """
+        if not self.running:
+            raise ServantError("engine: not running; start it before recording")
+        if self._hearing is None:
+            raise ServantError("microphone: no sound to record; check the microphone (see status)")
+        return self._hearing.record(seconds, timeout)
+
+    def take_picture(self) -> np.ndarray:
+        """A picture from the camera now (BGR uint8); ServantError if there is none."""
+        if self._sight is None:
+            raise ServantError("camera: none in use; start with a camera to take pictures")
+        frame = self._sight.grab(self.clock())
+        if frame is None:
+            message = self._bus.status.get("camera")
+            raise ServantError(message.message if message else "camera: no picture")
+        return frame
+
+    def latest_scores(self) -> dict[str, dict[str, float]]:
+        """The last per-scene scores: {"acoustic": {scene: p}, "visual": {scene: p}}."""
+        with self._lock:
+            return {sense: dict(scores) for sense, scores in self._scores.items()}
+
+    # --- learning (see `learning`) ------------------------------------------------------------
+
+    def retrain(
+        self,
+        library: SceneLibrary | str | Path,
+        on_progress: Callable[[int, int], None] | None = None,
+    ) -> None:
+        """Refit copies of both recognisers on a scene library, then swap them in (the senses keep
+        running on the old ones meanwhile). A sense without a recogniser gets a new one of its
+        `fresh_methods` method. Unreadable files are reported and skipped. A sense that cannot
+        be trained (e.g. pictures of one scene only) is reported and keeps its recogniser while
+        the other is retrained; if neither can be, the first reason is raised. `on_progress(done,
+        total)` is called after each file read, recordings then pictures, on this thread."""
+        if not isinstance(library, SceneLibrary):
+            library = SceneLibrary.scan(library)
+        with self._update_lock:
+            with self._lock:
+                acoustic, visual = self.acoustic, self.visual
+            new_acoustic = new_visual = None
+            failures: list[ServantError] = []
+            total, heard = len(library.recordings) + len(library.pictures), len(library.recordings)
+            try:
+                new_acoustic = learning.refit_audio(
+                    library,
+                    learning.copy_or_fresh(acoustic, "audio", self.fresh_methods["audio"]),
+                    self.window_seconds,
+                    self._report_error,
+                    progress_part(on_progress, 0, total),
+                )
+            except ServantError as error:
+                failures.append(ServantError(f"retrain (sound): {error}"))
+            try:
+                new_visual = learning.refit_pictures(
+                    library,
+                    learning.copy_or_fresh(visual, "image", self.fresh_methods["image"]),
+                    self._report_error,
+                    progress_part(on_progress, heard, total),
+                )
+            except ServantError as error:
+                failures.append(ServantError(f"retrain (pictures): {error}"))
+            if new_acoustic is None and new_visual is None:
+                if failures:
+                    raise failures[0]
+                return
+            for failure in failures:
+                self._error(str(failure))
+            with self._lock:
+                if new_acoustic is not None:
+                    self.acoustic = new_acoustic
+                    self._forget_windows()
+                self.visual = new_visual or self.visual
+                self.retrain_needed = False
+            self._save_models()
+
+    def _report_error(self, error: ServantError) -> None:
+        self._error(str(error))
+
+    def _ask_label(self, kept: Kept, scores: dict[str, float], t: float) -> None:
+        window_id = self._unknowns.keep(kept)
+        nearest = max(scores, key=lambda s: scores[s]) if scores else None
+        self._emit(UnknownScene(t, kept.sense, nearest, window_id))
+
+    def label_unknown(self, window_id: str, scene: str) -> Path:
+        """Give the scene the user named to an unknown window or picture (from `UnknownScene`).
+
+        It is written into the library (`library_root/<scene>/`, atomically), then folded into a
+        copy of the recogniser that replaces it, if it has `fold_in(X, scenes)`; otherwise
+        `retrain_needed` becomes True. With a `model_path`, the updated model is saved there.
+        Returns the file written.
+        """
+        scene = learning.checked_scene(scene)
+        kept = self._unknowns.take(window_id)
+        root = self.library_root or data_dir() / "library"
+        path = learning.write_labelled(root, scene, window_id, kept)
+        with self._update_lock:
+            with self._lock:
+                recogniser = self.acoustic if kept.sense == "audio" else self.visual
+                if recogniser is None or not hasattr(recogniser, "fold_in"):
+                    self.retrain_needed = True
+                    return path
+            model = learning.folded_in(recogniser, kept, scene)
+            with self._lock:
+                if kept.sense == "audio":
+                    self.acoustic = model
+                    self._forget_windows()
+                else:
+                    self.visual = model
+            self._save_models()
+        return path
+
+    def _save_models(self) -> None:
+        """Write the current recognisers to `model_path` (called under `_update_lock`)."""
+        if self.model_path is None:
+            return
+        with self._lock:
+            models = {"acoustic": self.acoustic, "visual": self.visual}
+        learning.save_models(self.model_path, models, self._report_error)
+
+
+def fusion_config(settings: Any) -> FusionConfig:
+    """The fusion windows of the user's settings (`servant_core.settings.Settings`)."""
+    return FusionConfig(
+        acoustic_window_s=settings.acoustic_window_s,
+        confirm_window_s=settings.confirm_window_s,
+        pictures_needed=settings.pictures_needed,
+        picture_interval_s=settings.picture_interval_s,
+    )
+
+
+def decision_unit(*recognisers: Recogniser | None) -> str | None:
+    """The unit of an average of these recognisers' confidences (a decision's): theirs when they
+    all share one, as percentages do; else None (the paper's eq. 1 and eq. 2 share none)."""
+    units = {getattr(r, "confidence_unit", None) for r in recognisers}
+    return units.pop() if len(units) == 1 else None
+
+
+def _predict(recogniser: Recogniser, X: np.ndarray) -> tuple[str, float, dict[str, float]]:
+    """(scene or UNKNOWN, confidence, {scene: probability}) for a single featurized row."""
+    scene = str(recogniser.predict(X)[0])
+    confidence = float(recogniser.confidence(X)[0])
+    probabilities = recogniser.predict_proba(X)[0]
+    return (
+        scene,
+        confidence,
+        {s: float(p) for s, p in zip(recogniser.scenes_, probabilities, strict=True)},
+    )

@@ -1,0 +1,164 @@
+"""Engines for front ends: the built-in demo, and the live devices with the user's settings.
+
+Both return an `Engine` that is not started; a missing device is reported when it starts, never
+raised here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from servant_core.capture.source import ManualClock, MonotonicClock
+from servant_core.engine.arm import Pose, PoseFor
+from servant_core.engine.core import Engine, fusion_config
+from servant_core.errors import ServantError
+from servant_core.fusion import POLICIES, FusionPolicy, SequentialFusion
+from servant_core.fusion.smoothing import STEADY_FLOOR, STEADY_STAY, SceneSmoother
+
+
+def build_demo_engine(
+    seed: int = 0,
+    clock: Callable[[], float] | None = None,
+    realtime: bool = True,
+    fusion: FusionPolicy | None = None,
+    library_root: str | Path | None = None,
+    arm: bool = True,
+    paper: bool = False,
+    on_progress: Callable[[int, int], None] | None = None,
+) -> Engine:
+    """The built-in demo: recognisers trained on freshly synthesised scenes (a couple of seconds),
+    then the synthesised walk (see `servant_core.demo.scenes`). By default Servant at its best:
+    the fresh methods (`FRESH_METHODS`) in percentages, smoothed, with the parallel policy;
+    `paper` gives the paper's recognisers (eqs. 1 and 2) and its sequential 30 s / 20 s policy.
+    With `arm`, an emulated arm (`servant_core.demo.arm`), disarmed, that the engine closes when
+    it stops. With `library_root`, the demo's training scenes are written there as a scene
+    library (the demo's own throw-away space: see `servant_core.demo.space`), for the library
+    screen and retrains. `on_progress(done, total)` follows the training (the slow part).
+
+    `realtime=False` runs the walk as fast as possible on a `ManualClock` (pass your own to read
+    it), so events — times included — are the same on every run: use `engine.run_until(t)` for a
+    thread-free deterministic run, or `start()` to stream them. With `realtime=True` the walk
+    plays at real speed on `clock` (default: monotonic time).
+    """
+    from servant_core.demo.scenes import (
+        DemoCamera,
+        demo_audio,
+        train_demo_recognisers,
+        write_demo_library,
+    )
+
+    if not realtime:
+        clock = clock if isinstance(clock, ManualClock) else ManualClock()
+    clock = clock or MonotonicClock()
+    acoustic, visual = train_demo_recognisers(seed, paper=paper, on_progress=on_progress)
+    if library_root is not None:
+        write_demo_library(library_root, seed)
+    audio = demo_audio(seed, realtime=realtime, clock=clock if not realtime else None)
+    if fusion is None:
+        fusion = SequentialFusion() if paper else POLICIES["parallel"]()
+    engine = Engine(
+        audio=audio,
+        camera=DemoCamera(clock, seed),
+        acoustic=acoustic,
+        visual=visual,
+        fusion=fusion,
+        clock=clock,
+        library_root=library_root,
+        smoother=None if paper else steady(),
+    )
+    if arm:
+        from servant_core.demo.arm import demo_learner, start_demo_arm
+
+        emulator, link = start_demo_arm()
+        engine.add_cleanup(emulator.stop)
+        engine.add_cleanup(link.close)  # runs first: the link closes before its emulator
+        engine.set_arm(link)
+        engine.set_action_learner(pose_for_taught(demo_learner()))
+    return engine
+
+
+def steady() -> SceneSmoother:
+    """The smoothing of live decisions: one odd window does not flip the scene, two do."""
+    return SceneSmoother(stay=STEADY_STAY, floor=STEADY_FLOOR)
+
+
+def pose_for_taught(learner: Any) -> PoseFor:
+    """The engine's action hook for an `ActionLearner`: the pose taught for the decided scene.
+
+    The learner is asked for the decided scene as a certainty (one-hot scores), not for the
+    senses' raw scores: those are never one-hot, and a wearer who taught "cup at chest height"
+    for the café wants that pose, not a blend with the street's. The engine has applied the
+    confidence threshold of the settings (which the user may change while it runs) before it
+    asks, so the learner's own, fixed when it was trained, is not applied a second time."""
+
+    def pose_for(scene: str, scores: dict[str, dict[str, float]], confidence: float) -> Pose:
+        return learner.pose_for(scene, None, 100.0)
+
+    return pose_for
+
+
+@dataclass(frozen=True)
+class LiveSettings:
+    """What `build_live_engine` needs; every field has a sensible default.
+
+    `model`: a model file from `servant train` (None: no recognisers, senses only).
+    `model_path`: where retrains and fold-ins are saved (None: back to `model`).
+    `microphone`: device index or name (None: the default input); `rate`: None for its default.
+    `camera`: index, video file or image-sequence pattern (None: no camera).
+    `user`: the user's settings (`servant_core.settings.Settings`: fusion windows, confidence
+    threshold, the arm's port, protocol and joints); None: the defaults, and no arm.
+    `policy`: the fusion policy's name (`servant_core.fusion.POLICIES`).
+    `learner`: the action learner file teach mode trains (None: `default_learner_path()`, if
+    there is one yet).
+    """
+
+    model: str | Path | None = None
+    model_path: str | Path | None = None
+    microphone: int | str | None = None
+    rate: int | None = None
+    use_microphone: bool = True
+    camera: int | str | None = 0
+    library_root: str | Path | None = None
+    user: Any = None
+    policy: str = "parallel"
+    learner: str | Path | None = None
+
+
+def build_live_engine(
+    settings: LiveSettings | None = None, fusion: FusionPolicy | None = None
+) -> Engine:
+    """An engine on the live devices and the arm of the user's settings, with the poses taught
+    in teach mode. A missing microphone, camera or arm, or no poses taught yet, is reported when
+    the engine starts (`DeviceStatus(ok=False)`, `Notice`), never raised: the engine runs on
+    what there is. A model file that cannot be read is raised (ServantError)."""
+    from servant_core.actions.learner import ActionLearner, default_learner_path
+    from servant_core.capture.camera import Camera
+    from servant_core.capture.microphone import Microphone
+    from servant_core.modelfile import load_model
+    from servant_core.settings import Settings
+
+    settings = settings or LiveSettings()
+    user = settings.user or Settings()
+    models = load_model(settings.model) if settings.model else {}
+    engine = Engine(
+        audio=Microphone(settings.microphone, settings.rate) if settings.use_microphone else None,
+        camera=Camera(settings.camera) if settings.camera is not None else None,
+        acoustic=models.get("acoustic"),
+        visual=models.get("visual"),
+        fusion=fusion or POLICIES[settings.policy](fusion_config(user)),
+        library_root=settings.library_root,
+        model_path=settings.model_path or settings.model,
+        confidence_threshold=user.confidence_threshold,
+        smoother=steady(),
+    )
+    engine.connect_arm(user.serial_port, user.protocol, user.joints)
+    learner_file = Path(settings.learner or default_learner_path())
+    if settings.learner is not None or learner_file.is_file():
+        try:
+            engine.set_action_learner(pose_for_taught(ActionLearner.load(learner_file)))
+        except ServantError as error:
+            engine.note(f"{error}; the arm stays put until a pose is taught again")
+    return engine

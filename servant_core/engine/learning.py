@@ -1,0 +1,164 @@
+"""The learning part of the engine: refitting on a library, keeping unknowns, folding in a label,
+and saving the result.
+
+These are the pieces; `Engine.retrain` and `Engine.label_unknown` hold the locks and swap the new
+recognisers in. Every update is made on a copy, so the sense thread, which may be predicting with
+the old recogniser right now, never sees half of one.
+"""
+
+from __future__ import annotations
+
+import copy
+import re
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from servant_core.audio import DEFAULT_RATE, resample, write_wav
+from servant_core.errors import ServantError
+from servant_core.library import SceneLibrary, featurize_recordings, read_pictures
+from servant_core.modelfile import save_model
+from servant_core.recognisers import Recogniser, make_recogniser
+from servant_core.storage import atomic_write_bytes
+
+UNKNOWN_KEPT = 16  # unknown windows/pictures kept for the user to label, the oldest dropped first
+
+OnError = Callable[[ServantError], None]
+OnProgress = Callable[[int, int], None]
+
+
+@dataclass
+class Kept:
+    """An unknown window or picture, held until the user labels it."""
+
+    sense: str  # "audio" | "image"
+    data: np.ndarray
+    rate: int = 0
+
+
+class Unknowns:
+    """The last `UNKNOWN_KEPT` unknown windows and pictures, by id ("audio-3"), thread-safe."""
+
+    def __init__(self) -> None:
+        self._kept: OrderedDict[str, Kept] = OrderedDict()
+        self._count = 0
+        self._lock = threading.Lock()
+
+    def keep(self, kept: Kept) -> str:
+        with self._lock:
+            self._count += 1
+            window_id = f"{kept.sense}-{self._count}"
+            self._kept[window_id] = kept
+            while len(self._kept) > UNKNOWN_KEPT:
+                self._kept.popitem(last=False)
+        return window_id
+
+    def take(self, window_id: str) -> Kept:
+        with self._lock:
+            kept = self._kept.pop(window_id, None)
+        if kept is None:
+            raise ServantError(
+                f"{window_id}: no such unknown window (only the last {UNKNOWN_KEPT} are kept)"
+            )
+        return kept
+
+
+def copy_or_fresh(recogniser: Recogniser | None, sense: str, method: str) -> Any:
+    """A copy of `recogniser` to refit, or a new one of `method` for a sense that has none."""
+    if recogniser is not None:
+        return copy.deepcopy(recogniser)
+    return make_recogniser(sense, method)
+
+
+def refit_audio(
+    library: SceneLibrary,
+    model: Any,
+    window_seconds: float,
+    on_error: OnError,
+    on_progress: OnProgress | None = None,
+) -> Any:
+    """`model` fitted on the library's windows; None if the library has no recordings."""
+    if not library.recordings:
+        return None
+    windows = featurize_recordings(
+        library.recordings,
+        model.featurize,
+        rate=getattr(model, "rate", DEFAULT_RATE),
+        seconds=window_seconds,
+        on_error=on_error,
+        on_progress=on_progress,
+    )
+    return model.fit(windows.features, list(windows.scenes))
+
+
+def refit_pictures(
+    library: SceneLibrary, model: Any, on_error: OnError, on_progress: OnProgress | None = None
+) -> Any:
+    """`model` fitted on the library's pictures; None if there are none it can read."""
+    if not library.pictures:
+        return None
+    images, kept = read_pictures(library.pictures, on_error=on_error, on_progress=on_progress)
+    if not images:
+        return None
+    return model.fit(model.featurize(images), [p.scene for p in kept])
+
+
+def checked_scene(scene: str) -> str:
+    """The scene name a user typed, if it can be a library folder; ServantError if not."""
+    scene = scene.strip()
+    if not re.fullmatch(r"[^/\\.][^/\\]*", scene):
+        raise ServantError(f"scene name {scene!r}: use a plain folder name, e.g. 'kitchen'")
+    return scene
+
+
+def write_labelled(root: Path, scene: str, window_id: str, kept: Kept) -> Path:
+    """Write a labelled unknown into the library (`root/<scene>/`, atomically); the file."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    if kept.sense == "audio":
+        return write_wav(root / scene / f"heard-{stamp}-{window_id}.wav", kept.data, kept.rate)
+    ok, png = cv2.imencode(".png", kept.data)
+    if not ok:
+        raise ServantError(f"{window_id}: the picture could not be encoded as PNG")
+    return atomic_write_bytes(root / scene / f"seen-{stamp}-{window_id}.png", png.tobytes())
+
+
+def folded_in(recogniser: Any, kept: Kept, scene: str) -> Any:
+    """A copy of `recogniser` (one with `fold_in`) that also knows `kept` as `scene`."""
+    if kept.sense == "audio":
+        samples = resample(kept.data, kept.rate, getattr(recogniser, "rate", kept.rate))
+        X = recogniser.featurize(samples[None, :])
+    else:
+        X = recogniser.featurize([kept.data])
+    model = copy.deepcopy(recogniser)
+    model.fold_in(X, [scene])
+    return model
+
+
+def save_models(path: Path, models: Mapping[str, Recogniser | None], on_error: OnError) -> None:
+    """Write the recognisers that exist to `path`. A failed write is reported; the file keeps
+    its previous content (atomic replace)."""
+    try:
+        save_model(path, {role: m for role, m in models.items() if m is not None})
+    except (OSError, ServantError) as error:
+        on_error(
+            ServantError(
+                f"{path}: the updated model could not be saved ({error}); it is used "
+                "until the program ends, and the file keeps the previous model"
+            )
+        )
+
+
+def progress_part(on_progress: OnProgress | None, offset: int, total: int) -> OnProgress | None:
+    """A part of a job reports `(done, its own total)`; the job's `on_progress` hears
+    `(offset + done, total)`, so one bar runs over every part without going back."""
+    if on_progress is None:
+        return None
+    report = on_progress
+    return lambda done, _part_total: report(offset + done, total)

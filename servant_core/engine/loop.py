@@ -1,0 +1,207 @@
+"""The device side of the sense loop: opening, reopening and reading the microphone and camera.
+
+`Hearing` keeps the last `RING_SECONDS` of audio in a ring, makes a spectrum frame ~30 times per
+second of audio and cuts consecutive windows, handing each to the engine. `Sight` grabs a
+picture when asked. Both report their device's state on the bus once per change, and a live
+device that failed is reopened every `reopen_seconds`; a replay's fault is one bad file, and the
+replay goes on with the next.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+
+import numpy as np
+
+from servant_core.capture.ring import RingBuffer
+from servant_core.capture.source import AudioSource, FrameSource
+from servant_core.engine.bus import EventBus
+from servant_core.errors import ServantError
+from servant_core.events import SpectrumFrame
+
+SPECTRUM_SIZE = 2048
+SPECTRUM_FPS = 30.0
+RING_SECONDS = 30.0  # what the ring holds: a window being cut while teach mode records 5 s
+
+
+def spectrum_db(samples: np.ndarray, rate: int) -> tuple[np.ndarray, np.ndarray]:
+    """(frequencies in Hz, magnitude in dB re full scale) of a Hann-windowed stretch of samples.
+
+    A full-scale sine reads 0 dB; silence is floored at −120 dB.
+    """
+    n = len(samples)
+    hann = np.hanning(n)
+    magnitude = np.abs(np.fft.rfft(samples * hann)) * 2.0 / hann.sum()
+    return np.fft.rfftfreq(n, 1.0 / rate), 20.0 * np.log10(np.maximum(magnitude, 1e-6))
+
+
+class Hearing:
+    """The audio source, its ring, its spectra and its windows.
+
+    `on_window(window, rate)` is called on the sense thread for each `window_seconds` of audio.
+    """
+
+    def __init__(
+        self,
+        source: AudioSource,
+        bus: EventBus,
+        on_window: Callable[[np.ndarray, int], None],
+        *,
+        window_seconds: float,
+        reopen_seconds: float,
+        spectrum_fps: float = SPECTRUM_FPS,
+        spectrum_size: int = SPECTRUM_SIZE,
+    ) -> None:
+        self.source = source
+        self.bus = bus
+        self.on_window = on_window
+        self.window_seconds = window_seconds
+        self.reopen_seconds = reopen_seconds
+        self.spectrum_fps = spectrum_fps
+        self.spectrum_size = spectrum_size
+        self.ok = False
+        self.ring: RingBuffer | None = None
+        self._retry_at = 0.0
+        self._next_window_end = 0
+        self._next_spectrum_at = 0
+
+    @property
+    def rate(self) -> int:
+        """The rate of the blocks; 0 while the source is not working."""
+        return self.source.rate if self.ok else 0
+
+    def open(self) -> None:
+        try:
+            self.source.open()
+        except ServantError as error:
+            self.ok = False
+            self._retry_at = self.bus.clock() + self.reopen_seconds
+            self.bus.report("microphone", False, str(error))
+            return
+        rate = self.source.rate
+        if self.ring is None or self.ring.capacity != int(rate * RING_SECONDS):
+            self.ring = RingBuffer(int(rate * RING_SECONDS))
+        # Windows start afresh after (re)opening: never stitch audio from both sides of a gap.
+        self._next_window_end = self.ring.total + int(round(self.window_seconds * rate))
+        self._next_spectrum_at = self.ring.total
+        self.ok = True
+        note = getattr(self.source, "rate_note", None)
+        self.bus.report("microphone", True, note or f"{self.source.name}: listening at {rate} Hz")
+
+    def close(self) -> None:
+        self.source.close()
+        self.ok = False
+
+    def reopen_if_due(self, t: float) -> None:
+        if not self.ok and t >= self._retry_at:
+            self.open()
+
+    def listen(self, timeout: float) -> bool:
+        """Take a block if one comes within `timeout`; False once a replay has run out."""
+        try:
+            block = self.source.read(timeout)
+        except ServantError as error:
+            self._fault(error)
+            block = None
+        if block is not None and len(block):
+            self._on_block(block)
+        elif self.source.exhausted:
+            self.bus.report("microphone", False, f"{self.source.name}: finished")
+            return False
+        return True
+
+    def _fault(self, error: ServantError) -> None:
+        """A live device that stopped is closed and reopened later; a replay skips the bad file."""
+        if not getattr(self.source, "live", False):
+            self.bus.error(str(error))
+            return
+        self.bus.report("microphone", False, str(error))
+        self.close()
+        self._retry_at = self.bus.clock() + self.reopen_seconds
+
+    def _on_block(self, block: np.ndarray) -> None:
+        assert self.ring is not None
+        ring, rate = self.ring, self.source.rate
+        ring.append(block)
+        total = ring.total
+        if (
+            self.spectrum_fps > 0
+            and total >= self._next_spectrum_at
+            and total >= self.spectrum_size
+        ):
+            freqs, db = spectrum_db(ring.latest(self.spectrum_size), rate)
+            self.bus.emit(SpectrumFrame(self.bus.clock(), freqs, db))
+            hop = max(1, int(rate / self.spectrum_fps))
+            self._next_spectrum_at = (total // hop + 1) * hop
+        size = int(round(self.window_seconds * rate))
+        while total >= self._next_window_end:
+            end = self._next_window_end
+            self._next_window_end += size
+            self.on_window(ring.read(end - size, end), rate)
+
+    def record(self, seconds: float, timeout: float | None) -> np.ndarray:
+        """The next `seconds` of audio from now (blocks until they have arrived)."""
+        ring = self.ring
+        if ring is None or not self.ok:
+            raise ServantError("microphone: no sound to record; check the microphone (see status)")
+        count = int(round(seconds * self.source.rate))
+        if count > ring.capacity:
+            raise ServantError(f"engine: cannot record more than {RING_SECONDS:g} s at once")
+        end = ring.total + count
+        if not ring.wait_for(end, timeout if timeout is not None else 2 * seconds + 2):
+            raise ServantError(f"{self.source.name}: the sound stopped while recording; try again")
+        return ring.read(end - count, end)
+
+
+class Sight:
+    """The camera: pictures on demand, from the sense thread or a front end's (one at a time)."""
+
+    def __init__(self, source: FrameSource, bus: EventBus, *, reopen_seconds: float) -> None:
+        self.source = source
+        self.bus = bus
+        self.reopen_seconds = reopen_seconds
+        self.ok = False
+        self._retry_at = 0.0
+        self._lock = threading.Lock()
+
+    def open(self) -> None:
+        with self._lock:
+            self._open()
+
+    def close(self) -> None:
+        with self._lock:
+            self.source.close()
+            self.ok = False
+
+    def grab(self, t: float) -> np.ndarray | None:
+        """A frame, reopening the camera if it failed a while ago; None if there is none."""
+        with self._lock:
+            if not self.ok:
+                if t < self._retry_at:
+                    return None
+                self._open()
+                if not self.ok:
+                    return None
+            try:
+                frame = self.source.read()
+            except ServantError as error:
+                self._fault(error)
+                return None
+            self.bus.report("camera", True, f"{self.source.name}: ready")
+            return frame
+
+    def _open(self) -> None:
+        try:
+            self.source.open()
+        except ServantError as error:
+            self._fault(error)
+            return
+        self.ok = True
+        self.bus.report("camera", True, f"{self.source.name}: ready")
+
+    def _fault(self, error: ServantError) -> None:
+        self.source.close()
+        self.ok = False
+        self._retry_at = self.bus.clock() + self.reopen_seconds
+        self.bus.report("camera", False, str(error))
