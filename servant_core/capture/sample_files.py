@@ -164,7 +164,8 @@ def resampled(log: SampleLog, rate: int) -> list[np.ndarray]:
     cuts = np.flatnonzero(np.diff(t) > MAX_GAP_S) + 1
     pieces = []
     for times, values in zip(np.split(t, cuts), np.split(v, cuts), strict=True):
-        grid = np.arange(times[0], times[-1], 1.0 / rate)
+        # the last reading stands for one period after it: 10 readings at 2 Hz are 5 s
+        grid = times[0] + np.arange(int(np.floor((times[-1] - times[0]) * rate + 1e-6)) + 1) / rate
         if len(grid) < 2:
             continue
         pieces.append(

@@ -19,11 +19,13 @@ climbs). Everything is deterministic by the generator passed in.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from pathlib import Path
 
 import numpy as np
 
 from servant_core.audio import DEFAULT_WINDOW_SECONDS
+from servant_core.capture.sample_files import SUFFIXES, write_sample_csv
 from servant_core.capture.sensors import AMBIENT_RATE, IMU_RATE
 
 G = 9.80665
@@ -38,6 +40,8 @@ SCENE_AMBIENT = {
     "vehicle": (1500.0, 20.0),
 }
 SEA_LEVEL_HPA = 1013.25
+DEMO_SCENES = ("coffee", "gym", "street")  # as `demo.scenes.SCENES` (not imported: it loads cv2)
+LIBRARY_STREAM = 4  # the seed word of `write_sensor_library`'s windows
 
 
 def _orientation(rng: np.random.Generator) -> np.ndarray:
@@ -147,3 +151,20 @@ def synth_ambient(
     warmth = celsius + rng.normal(0, 0.7) + 0.05 * rng.normal(size=n)
     pressure = weather_hpa + rng.normal(0, 0.3) + 0.03 * rng.normal(size=n)
     return np.stack([light, warmth, pressure], axis=1).astype(np.float32)
+
+
+def write_sensor_library(
+    root: str | Path, seed: int = 0, windows_per_scene: int = 6, scenes: Sequence[str] = DEMO_SCENES
+) -> Path:
+    """Synthesised windows as a scene library under `root`: `<scene>/demo-NN.imu.csv` and
+    `<scene>/demo-NN.ambient.csv`, as teach mode would keep them."""
+    root = Path(root)
+    for s, scene in enumerate(scenes):
+        for i in range(windows_per_scene):
+            rng = np.random.default_rng([seed, LIBRARY_STREAM, s, i])
+            stem = root / scene / f"demo-{i:02d}"
+            write_sample_csv(f"{stem}{SUFFIXES['imu']}", synth_motion(scene, rng), IMU_RATE, "imu")
+            write_sample_csv(
+                f"{stem}{SUFFIXES['ambient']}", synth_ambient(scene, rng), AMBIENT_RATE, "ambient"
+            )
+    return root

@@ -1,15 +1,17 @@
 """`kmeans` for the motion and ambient senses: per-scene K-Means over a window's few features.
 
 A window of sensor readings (n, channels) becomes a short feature vector (`features.motion`,
-`features.ambient`); the vectors are standardised and each scene's are clustered by K-Means
-into a few centroids with their own spreads (`SceneCentroids`, the head the sound and picture
-methods share), so probabilities come from distances and a window far from every centroid is an
-unknown place.
+`features.ambient`). The vectors are standardised and, with 20 training windows a scene or
+more, projected on the directions that separate the scenes (shrunk LDA, `discriminant`: some
+features, such as the pressure's jitter, are mostly noise and would otherwise weigh as much as
+the light). Each scene's vectors are clustered by K-Means into a few centroids with their own
+spreads (`SceneCentroids`, the head the sound and picture methods share): probabilities come
+from distances, and a window far from every centroid is an unknown place.
 
-The probabilities are calibrated: the spreads the head measured on its own training rows are
-too tight for windows it has not seen (they were fitted on those rows), so one factor on all
-spreads is chosen to minimise the log-loss of held-out rows (stratified folds of the training
-set). With too few rows to hold any out, the factor stays 1.
+The probabilities are calibrated: spreads measured on the rows the centroids were fitted on
+misjudge windows never seen, so one factor on all spreads is chosen to minimise the log-loss of
+held-out rows (stratified folds of the training set). With fewer than three rows of a scene
+nothing can be held out, and the factor stays 1.
 """
 
 from __future__ import annotations
@@ -37,8 +39,7 @@ class SensorCentroidRecogniser(CentroidRecogniser):
 
     channels: ClassVar[tuple[str, ...]]
     default_rate: ClassVar[int]
-    # the features are few and fixed: neither a projection nor a whitened novelty space pays
-    discriminant = False
+    # the features are few: a whitened novelty space adds nothing to plain distances
     whitened_novelty = False
 
     def __init__(
@@ -48,6 +49,7 @@ class SensorCentroidRecogniser(CentroidRecogniser):
         window_seconds: float = 5.0,
         clusters_per_scene: int = 2,
         spread_shrinkage: float = 0.5,
+        discriminant: bool = True,
         reject_quantile: float = 0.95,
         reject_margin: float = 1.5,
         random_state: int | None = 0,
@@ -57,6 +59,7 @@ class SensorCentroidRecogniser(CentroidRecogniser):
         self.window_seconds = window_seconds
         self.clusters_per_scene = clusters_per_scene
         self.spread_shrinkage = spread_shrinkage
+        self.discriminant = discriminant
         self.reject_quantile = reject_quantile
         self.reject_margin = reject_margin
         self.random_state = random_state
