@@ -18,6 +18,7 @@ from servant_core.capture.sample_files import (
     write_sample_csv,
 )
 from servant_core.capture.sensor_emulator import SensorEmulator, parse_script, script_scene
+from servant_core.capture.sensor_sources import sensor_sources
 from servant_core.capture.sensors import (
     IMU_CHANNELS,
     SensorBoard,
@@ -245,3 +246,27 @@ def test_a_replay_that_follows_another_clock_waits_for_it(tmp_path):
     clock.advance(2.0)
     got = [source.read(0.0) for _ in range(10)]
     assert sum(len(b) for b in got if b is not None) == 4
+
+
+def test_one_port_named_for_both_streams_is_one_board_and_a_folder_replays_by_scene(tmp_path):
+    emulator = SensorEmulator(script_scene([("gym", 1000.0)]))
+    port = emulator.start()
+    write_sample_csv(tmp_path / "gym" / "a.ambient.csv", np.ones((10, 3)), 2, "ambient")
+    write_sample_csv(tmp_path / "cafe" / "b.ambient.csv", np.ones((10, 3)), 2, "ambient")
+    try:
+        both = sensor_sources({"imu": port, "ambient": port})
+        assert both["imu"].board is both["ambient"].board  # opened once: the port is exclusive
+        for source in both.values():
+            source.open()
+        assert read_rows(both["imu"], 0.3).shape[1] == 6
+        for source in both.values():
+            source.close()
+        mixed = sensor_sources({"imu": port, "ambient": str(tmp_path)}, realtime=False)
+        replay = mixed["ambient"]
+        replay.open()
+        replay.read(0.0)
+        assert replay.current_label == "cafe" and mixed["imu"].live and not replay.live
+        with pytest.raises(ServantError, match="no .imu.csv files"):
+            sensor_sources({"imu": str(tmp_path)})
+    finally:
+        emulator.stop()
