@@ -12,7 +12,6 @@ from __future__ import annotations
 import os
 import threading
 import time
-import tty
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -22,6 +21,7 @@ from servant_core.audio import DEFAULT_WINDOW_SECONDS
 from servant_core.capture.sensors import AMBIENT_RATE, IMU_RATE, format_line
 from servant_core.demo.motion_synth import SEA_LEVEL_HPA, synth_ambient, synth_motion
 from servant_core.errors import ServantError
+from servant_core.pty_port import PtyPort
 
 CHUNK_SECONDS = DEFAULT_WINDOW_SECONDS  # synthesised a window at a time, like the demo's sound
 TICK_S = 0.02
@@ -88,8 +88,7 @@ class SensorEmulator:
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._fds: tuple[int, int] | None = None
-        self._link: Path | None = None
+        self._pty: PtyPort | None = None
         self._t0 = 0.0
 
     def _chunk(self, kind: str, k: int) -> np.ndarray:
@@ -131,37 +130,21 @@ class SensorEmulator:
 
     def start(self, link: str | Path | None = None) -> str:
         """Serve on a new pty; return the port to open (`link`, a symlink to it, if given)."""
-        master, slave = os.openpty()
-        tty.setraw(slave)  # no echo, no line editing: a serial line carries bytes as they are
-        os.set_blocking(master, False)  # a host that does not read must not stall the board
-        self._fds = (master, slave)
-        self.port = os.ttyname(slave)
-        if link is not None:
-            path = Path(link)
-            tmp = path.with_name(f".{path.name}.tmp")
-            try:
-                tmp.unlink(missing_ok=True)
-                tmp.symlink_to(self.port)
-                os.replace(tmp, path)
-            except OSError as exc:
-                self.stop()
-                raise ServantError(
-                    f"{path}: cannot make it a link to the emulator's port ({exc.strerror}); "
-                    "give a path in a folder you can write to"
-                ) from exc
-            self._link = path
+        self._pty = PtyPort(link)
+        os.set_blocking(self._pty.master, False)  # a host that does not read must not stall it
+        self.port = self._pty.device
         self._t0 = self.clock()
         self._sent = {"imu": 0, "ambient": 0}
         self._stop.clear()
         self._write(BANNER)
         self._thread = threading.Thread(target=self._serve, name="sensor-emulator", daemon=True)
         self._thread.start()
-        return str(self._link) if self._link else self.port
+        return self._pty.port
 
     def _write(self, data: bytes) -> None:
-        assert self._fds is not None
+        assert self._pty is not None
         try:
-            written = os.write(self._fds[0], data)
+            written = os.write(self._pty.master, data)
         except BlockingIOError:
             written = 0
         self.dropped_bytes += len(data) - written
@@ -189,17 +172,9 @@ class SensorEmulator:
         if self._thread is not None:
             self._thread.join()
             self._thread = None
-        if self._fds is not None:
-            for fd in self._fds:
-                os.close(fd)
-            self._fds = None
-        if (
-            self._link is not None
-            and self._link.is_symlink()
-            and os.readlink(self._link) == self.port
-        ):
-            self._link.unlink()
-        self._link = None
+        if self._pty is not None:
+            self._pty.close()
+            self._pty = None
 
     def __enter__(self) -> SensorEmulator:
         return self
