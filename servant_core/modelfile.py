@@ -32,7 +32,7 @@ from servant_core.storage import atomic_save_npz
 
 FORMAT = "servant-model"
 VERSION = 1
-ROLE_SENSE = {"acoustic": "audio", "visual": "image"}
+ROLE_SENSE = {"acoustic": "audio", "visual": "image", "motion": "motion", "ambient": "ambient"}
 
 # What a model file may hold, checked before anything is read in full. The largest real model
 # (the paper's FFT centroids, ten scenes) is about 10 MB; these limits leave ample room and keep
@@ -56,6 +56,8 @@ PARAM_LIMITS: dict[str, tuple[float, float]] = {
     "n_bins": (1, 360),
 }
 GENERIC_LIMIT = (-1e9, 1e9)
+# the senses whose `rate` is a sensor's readings a second, not an audio sample rate
+SENSOR_RATE_LIMITS = {"motion": (1, 2000), "ambient": (1, 100)}
 
 
 def save_model(path: str | Path, recognisers: dict[str, Recogniser]) -> Path:
@@ -218,7 +220,7 @@ def _recogniser(
         )
     cls = methods[method]
     try:
-        _check_params(cls, state.get("params"))
+        _check_params(cls, state.get("params"), state["sense"])
         _check_scenes(state)
         _check_arrays(parts)
         # methods with a discriminative head keep their only centroids under `novelty`
@@ -242,7 +244,7 @@ def _recogniser(
 SEQUENCES = (tuple, list, collections.abc.Sequence)
 
 
-def _check_params(cls: type, params: Any) -> None:
+def _check_params(cls: type, params: Any, sense: str) -> None:
     """Each parameter must be one the method takes, of the type its `__init__` declares (a
     float may be written as a whole number), and numbers within limits."""
     if not isinstance(params, dict):
@@ -265,6 +267,8 @@ def _check_params(cls: type, params: Any) -> None:
             raise ValueError(f"parameter {name} is {str(value)[:20]!r}")
         if kind in (int, float):
             low, high = PARAM_LIMITS.get(name, GENERIC_LIMIT)
+            if name == "rate" and sense in SENSOR_RATE_LIMITS:
+                low, high = SENSOR_RATE_LIMITS[sense]
             if not (math.isfinite(value) and low <= value <= high):
                 raise ValueError(f"parameter {name} is {value!r}, outside {low:g}–{high:g}")
 
@@ -335,6 +339,10 @@ def _try_out(recogniser: Recogniser) -> None:
     if recogniser.sense == "audio":
         rate, seconds = recogniser.rate, recogniser.window_seconds  # type: ignore[attr-defined]
         item: Any = 0.01 * rng.standard_normal((1, int(round(rate * seconds))), dtype=np.float32)
+    elif recogniser.sense in SENSOR_RATE_LIMITS:
+        rate, seconds = recogniser.rate, recogniser.window_seconds  # type: ignore[attr-defined]
+        shape = (int(round(rate * seconds)), len(recogniser.channels))  # type: ignore[attr-defined]
+        item = [1.0 + 0.01 * rng.standard_normal(shape, dtype=np.float32)]
     else:
         item = [rng.integers(0, 256, (48, 64, 3), dtype=np.uint8)]
     X = recogniser.featurize(item)

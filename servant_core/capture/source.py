@@ -1,6 +1,6 @@
-"""What the engine asks of a sense: audio sources give blocks, frame sources give pictures.
+"""What the engine asks of a sense: audio and sample sources give blocks, frame sources pictures.
 
-Both kinds are thin classes around a device or a file. They raise `ServantError` (one line: which
+All kinds are thin classes around a device or a file. They raise `ServantError` (one line: which
 device or file, what is wrong, what to do) when they fail; the engine reports it once and keeps
 running on the other senses, reopening the failed one from time to time.
 
@@ -36,6 +36,27 @@ class AudioSource(Protocol):
     name: str
     rate: int
     live: bool
+
+    def open(self) -> None: ...
+    def read(self, timeout: float) -> np.ndarray | None: ...
+    @property
+    def exhausted(self) -> bool: ...
+    def close(self) -> None: ...
+
+
+@runtime_checkable
+class SampleSource(Protocol):
+    """Multichannel float32 samples in consecutive blocks: a motion or an ambient sensor.
+
+    The same contract as `AudioSource`, except that a block is a 2-D array (n, channels) whose
+    columns `channels` names (e.g. ("ax", "ay", "az", "gx", "gy", "gz")), and `rate` is rows
+    per second (a sensor's rate: tens of hertz for motion, one or two for ambient values).
+    """
+
+    name: str
+    rate: int
+    live: bool
+    channels: tuple[str, ...]
 
     def open(self) -> None: ...
     def read(self, timeout: float) -> np.ndarray | None: ...

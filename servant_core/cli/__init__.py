@@ -24,6 +24,7 @@ SUBCOMMAND_MODULES = (
     "servant_core.cli.recognition",
     "servant_core.cli.arm",
     "servant_core.cli.live",
+    "servant_core.cli.sensors",
 )
 
 

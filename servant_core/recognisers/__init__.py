@@ -10,6 +10,7 @@ from servant_core.recognisers.bovw import BovwVisualRecogniser
 from servant_core.recognisers.codebook import CodebookAcousticRecogniser
 from servant_core.recognisers.kmeans_encoder import KMeansEncoderAcousticRecogniser
 from servant_core.recognisers.paper import PaperAcousticRecogniser, PaperVisualRecogniser
+from servant_core.recognisers.sensor_centroids import AmbientRecogniser, MotionRecogniser
 from servant_core.recognisers.softbovw import SoftBovwVisualRecogniser
 
 ACOUSTIC_METHODS: dict[str, type[Recogniser]] = {
@@ -23,13 +24,19 @@ VISUAL_METHODS: dict[str, type[Recogniser]] = {
     "softbovw": SoftBovwVisualRecogniser,
 }
 
+# each sense's methods by name; a new sense is one line here
+SENSE_METHODS: dict[str, dict[str, type[Recogniser]]] = {
+    "audio": ACOUSTIC_METHODS,
+    "image": VISUAL_METHODS,
+    "motion": {"kmeans": MotionRecogniser},
+    "ambient": {"kmeans": AmbientRecogniser},
+}
+
 
 def methods_for(sense: str) -> dict[str, type[Recogniser]]:
-    if sense == "audio":
-        return ACOUSTIC_METHODS
-    if sense == "image":
-        return VISUAL_METHODS
-    raise ValueError(f"unknown sense {sense!r}")
+    if sense not in SENSE_METHODS:
+        raise ValueError(f"unknown sense {sense!r}")
+    return SENSE_METHODS[sense]
 
 
 def make_audio_recogniser(method: str, **params: Any) -> AcousticRecogniser:
@@ -38,7 +45,12 @@ def make_audio_recogniser(method: str, **params: Any) -> AcousticRecogniser:
 
 # What a retrain fits for a sense that has no recogniser yet, and what `servant train` and the
 # demo use: the methods beyond the paper that lead on every protocol (docs/research.md).
-FRESH_METHODS = {"audio": "kmeans-encoder", "image": "bovw"}
+FRESH_METHODS = {
+    "audio": "kmeans-encoder",
+    "image": "bovw",
+    "motion": "kmeans",
+    "ambient": "kmeans",
+}
 
 
 def make_recogniser(sense: str, method: str, **params: Any) -> Recogniser:
@@ -57,6 +69,7 @@ __all__ = [
     "UNKNOWN",
     "VISUAL_METHODS",
     "Recogniser",
+    "SENSE_METHODS",
     "make_audio_recogniser",
     "make_recogniser",
     "methods_for",

@@ -13,13 +13,13 @@ import re
 import select
 import threading
 import time
-import tty
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 from servant_core.errors import ServantError
+from servant_core.pty_port import PtyPort
 from servant_core.servo import PROTOCOLS, firmata, maestro, ssc32
 
 FAULTS = (None, "silent", "garbage")
@@ -89,8 +89,7 @@ class ServoEmulator:
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
-        self._fds: tuple[int, int] | None = None
-        self._link: Path | None = None
+        self._pty: PtyPort | None = None
         self.port: str | None = None
 
     # -- behaviour ------------------------------------------------------------------------
@@ -298,34 +297,18 @@ class ServoEmulator:
 
     def start(self, link: str | Path | None = None) -> str:
         """Serve on a new pty; return the port to open (`link`, a symlink to it, if given)."""
-        master, slave = os.openpty()
-        tty.setraw(slave)  # no echo, no line editing: a serial line carries bytes as they are
-        self._fds = (master, slave)
-        self.port = os.ttyname(slave)
-        if link is not None:
-            path = Path(link)
-            tmp = path.with_name(f".{path.name}.tmp")
-            try:
-                tmp.unlink(missing_ok=True)
-                tmp.symlink_to(self.port)
-                os.replace(tmp, path)
-            except OSError as exc:
-                self.stop()
-                raise ServantError(
-                    f"{path}: cannot make it a link to the emulator's port ({exc.strerror}); "
-                    "give a path in a folder you can write to"
-                ) from exc
-            self._link = path
+        self._pty = PtyPort(link)
+        self.port = self._pty.device
         self._stop.clear()
         self._thread = threading.Thread(
             target=self._serve, name=f"servo-emulator-{self.protocol}", daemon=True
         )
         self._thread.start()
-        return str(self._link) if self._link else self.port
+        return self._pty.port
 
     def _serve(self) -> None:
-        assert self._fds is not None
-        master = self._fds[0]
+        assert self._pty is not None
+        master = self._pty.master
         while not self._stop.is_set():
             ready, _, _ = select.select([master], [], [], 0.05)
             if not ready:
@@ -344,7 +327,7 @@ class ServoEmulator:
     @property
     def serving(self) -> bool:
         """Whether its pty is open: False once stopped (unplugged)."""
-        return self._fds is not None
+        return self._pty is not None
 
     def stop(self) -> None:
         """Stop serving and close the pty: to the host this is the controller unplugged."""
@@ -352,17 +335,9 @@ class ServoEmulator:
         if self._thread is not None:
             self._thread.join()
             self._thread = None
-        if self._fds is not None:
-            for fd in self._fds:
-                os.close(fd)
-            self._fds = None
-        if (
-            self._link is not None
-            and self._link.is_symlink()
-            and os.readlink(self._link) == self.port
-        ):
-            self._link.unlink()
-        self._link = None
+        if self._pty is not None:
+            self._pty.close()
+            self._pty = None
 
     def __enter__(self) -> ServoEmulator:
         return self

@@ -1,0 +1,282 @@
+"""Motion and ambient recordings as CSV files: read (as phone sensor-logger apps export them),
+written (as teach mode keeps them), and replayed as a `SampleSource`.
+
+A file has a header row and one row per reading: a time column and one column per channel.
+
+- Motion (`*.imu.csv`): time, ax, ay, az (m/s²), gx, gy, gz (deg/s).
+- Ambient (`*.ambient.csv`): time, lux, celsius, hpa.
+
+Header spellings of the common apps are accepted, compared without case, spaces, punctuation
+and the unit in brackets: `accX`, `acc_x`, `Acceleration x (m/s^2)`, `gyroX`, `rotationRateX`,
+`Illuminance (lx)`, `Temperature`, `Pressure (hPa)`... (`ALIASES`). A unit in brackets
+converts: acceleration in g, rotation in rad/s, pressure in Pa or kPa. Time is in seconds, or in
+ms or ns when the header says so (`time_ns`, `Time (ms)`); without a unit, steps of 10⁴ or more
+are nanoseconds (phone loggers stamp with the system's nanosecond clock).
+
+Readings are resampled onto a uniform grid at the sensor rate (phones log with jitter); a pause
+longer than `MAX_GAP_S` splits the file rather than being bridged by a straight line. Rows that
+do not parse are skipped and counted; a file with no usable rows is one `ServantError`.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import re
+import time
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from servant_core.audio import open_regular_file, os_reason
+from servant_core.capture.replay import Clip, PacedAudio
+from servant_core.capture.sensors import CHANNELS, RATES
+from servant_core.capture.source import ManualClock
+from servant_core.errors import ServantError
+from servant_core.storage import atomic_write_text
+
+SUFFIXES = {"imu": ".imu.csv", "ambient": ".ambient.csv"}
+MAX_GAP_S = 1.0  # longer pauses in a log are not interpolated across
+MAX_FILE_BYTES = 512 * 1024 * 1024  # a day of 100 Hz motion is ~500 MB: more is not a log
+G = 9.80665
+
+ALIASES: dict[str, tuple[str, ...]] = {
+    "time": ("time", "t", "timestamp", "secondselapsed", "elapsed", "timens", "timems"),
+    "ax": ("ax", "accx", "accelx", "accelerationx", "accelerometerx", "linearaccx"),
+    "ay": ("ay", "accy", "accely", "accelerationy", "accelerometery", "linearaccy"),
+    "az": ("az", "accz", "accelz", "accelerationz", "accelerometerz", "linearaccz"),
+    "gx": ("gx", "gyrx", "gyrox", "gyroscopex", "rotationratex", "wx"),
+    "gy": ("gy", "gyry", "gyroy", "gyroscopey", "rotationratey", "wy"),
+    "gz": ("gz", "gyrz", "gyroz", "gyroscopez", "rotationratez", "wz"),
+    "lux": ("lux", "light", "illuminance", "lightlux", "illuminancelux", "lx"),
+    "celsius": ("celsius", "temp", "temperature", "tempc", "temperaturec", "degc"),
+    "hpa": ("hpa", "pressure", "pressurehpa", "baro", "barometer", "airpressure", "mbar"),
+}
+# a unit in brackets, and the factor to the file format's unit
+UNIT_FACTORS = {
+    "g": G,
+    "rad/s": 180.0 / math.pi,
+    "pa": 0.01,
+    "kpa": 10.0,
+}
+
+
+def _normalised(header: str) -> tuple[str, str]:
+    """(name, unit): lower case without brackets, spaces or punctuation; the bracketed unit."""
+    unit = re.search(r"[\(\[]([^\)\]]*)[\)\]]", header)
+    name = re.sub(r"[\(\[][^\)\]]*[\)\]]", "", header.lower())
+    return re.sub(r"[^a-z0-9]", "", name), (unit.group(1).strip().lower() if unit else "")
+
+
+@dataclass(frozen=True)
+class SampleLog:
+    """A file's readings: `times` in seconds (n,), `values` (n, channels) in the format's units,
+    and how many rows were skipped."""
+
+    times: np.ndarray
+    values: np.ndarray
+    skipped: int
+
+
+def read_sample_csv(path: str | Path, kind: str) -> SampleLog:
+    """The readings of a motion (`kind="imu"`) or ambient CSV, sorted by time."""
+    path = Path(path)
+    channels = CHANNELS[kind]
+    with open_regular_file(path, f"{kind} CSV file") as handle:
+        try:
+            if Path(path).stat().st_size > MAX_FILE_BYTES:
+                raise ServantError(f"{path}: larger than any sensor log; split it into files")
+            text = io.TextIOWrapper(handle, encoding="utf-8-sig", errors="replace", newline="")
+            rows = csv.reader(text)
+            header = next(rows, None)
+            if header is None:
+                raise ServantError(f"{path}: empty; a {kind} CSV starts with a header row")
+            columns, factors, time_unit = _columns(path, header, channels)
+            times, values, skipped = [], [], 0
+            for row in rows:
+                try:
+                    stamp = _stamp(row[columns[0]])
+                    numbers = [float(row[c]) for c in columns[1:]]
+                except (ValueError, IndexError):
+                    skipped += 1
+                    continue
+                if not all(math.isfinite(v) for v in (stamp, *numbers)):
+                    skipped += 1
+                    continue
+                times.append(stamp)
+                values.append(numbers)
+        except OSError as exc:
+            raise ServantError(f"{path}: cannot read the file ({os_reason(exc)})") from None
+        except csv.Error as exc:
+            raise ServantError(f"{path}: not a CSV file ({exc}); export it as CSV") from None
+    if len(times) < 2:
+        raise ServantError(f"{path}: fewer than two readings that parse; record a longer log")
+    first = min(times)
+    # from the first stamp on, in Python numbers: nanosecond stamps (~1.7e18) are exact as
+    # integers but lose a quarter of a microsecond as floats
+    t = np.asarray([stamp - first for stamp in times], dtype=np.float64)
+    order = np.argsort(t, kind="stable")
+    t = t[order]
+    v = np.asarray(values, dtype=np.float64)[order] * np.asarray(factors)
+    return SampleLog(_seconds(t, time_unit), v.astype(np.float32), skipped)
+
+
+def _stamp(text: str) -> int | float:
+    """A time stamp: an integer kept exact, else a float."""
+    try:
+        return int(text)
+    except ValueError:
+        return float(text)
+
+
+def _columns(
+    path: Path, header: Sequence[str], channels: tuple[str, ...]
+) -> tuple[list[int], list[float], str]:
+    """Column of time and of each channel, each channel's unit factor, and the time's unit."""
+    found = [_normalised(h) for h in header]
+    columns: list[int] = []
+    factors: list[float] = []
+    time_unit = ""
+    for wanted in ("time", *channels):
+        match = [i for i, (name, _) in enumerate(found) if name in ALIASES[wanted]]
+        if not match:
+            spellings = ", ".join(ALIASES[wanted][:4])
+            raise ServantError(
+                f"{path}: no {wanted} column (header: {','.join(header)[:80]}); name it one of "
+                f"{spellings}"
+            )
+        name, unit = found[match[0]]
+        columns.append(match[0])
+        if wanted == "time":
+            time_unit = unit or next((u for u in ("ns", "ms") if name.endswith(u)), "")
+        else:
+            factors.append(UNIT_FACTORS.get(unit, 1.0))
+    return columns, factors, time_unit
+
+
+def _seconds(t: np.ndarray, unit: str) -> np.ndarray:
+    if unit in ("ns", "ms", "us"):
+        scale = {"ns": 1e-9, "us": 1e-6, "ms": 1e-3}[unit]
+    else:
+        steps = np.diff(t)
+        steps = steps[steps > 0]
+        scale = 1e-9 if len(steps) and np.median(steps) >= 1e4 else 1.0
+    return t * scale
+
+
+def resampled(log: SampleLog, rate: int) -> list[np.ndarray]:
+    """The log on a uniform grid at `rate` (linear interpolation), one array per stretch without
+    a pause longer than `MAX_GAP_S`; stretches shorter than one sample period are dropped."""
+    t, v = log.times, log.values.astype(np.float64)
+    keep = np.concatenate([[True], np.diff(t) > 0])  # duplicate stamps: the first reading
+    t, v = t[keep], v[keep]
+    cuts = np.flatnonzero(np.diff(t) > MAX_GAP_S) + 1
+    pieces = []
+    for times, values in zip(np.split(t, cuts), np.split(v, cuts), strict=True):
+        # the last reading stands for one period after it: 10 readings at 2 Hz are 5 s
+        grid = times[0] + np.arange(int(np.floor((times[-1] - times[0]) * rate + 1e-6)) + 1) / rate
+        if len(grid) < 2:
+            continue
+        pieces.append(
+            np.stack([np.interp(grid, times, values[:, c]) for c in range(v.shape[1])], axis=1)
+        )
+    return [p.astype(np.float32) for p in pieces]
+
+
+def read_samples(path: str | Path, kind: str, rate: int | None = None) -> np.ndarray:
+    """A whole file at `rate` (default: the sensor's), its stretches joined: (n, channels)."""
+    pieces = resampled(read_sample_csv(path, kind), rate or RATES[kind])
+    if not pieces:
+        raise ServantError(f"{path}: its readings span less than one sample; record a longer log")
+    return np.concatenate(pieces)
+
+
+def write_sample_csv(
+    path: str | Path, samples: np.ndarray, rate: int, kind: str, start: float = 0.0
+) -> Path:
+    """Write (n, channels) samples at `rate` as a CSV this module reads back, atomically."""
+    samples = np.asarray(samples)
+    channels = CHANNELS[kind]
+    if samples.ndim != 2 or samples.shape[1] != len(channels):
+        raise ValueError(f"expected (n, {len(channels)}) samples")
+    lines = [",".join(("time", *channels))]
+    for i, row in enumerate(samples):
+        values = ",".join(f"{float(x):.4f}" for x in row)
+        lines.append(f"{start + i / rate:.4f},{values}")
+    return atomic_write_text(path, "\n".join(lines) + "\n")
+
+
+class PacedSamples(PacedAudio):
+    """`PacedAudio`'s pacing over multichannel clips: a `SampleSource`.
+
+    `follow`, a clock (another source's `ManualClock`), keeps an as-fast-as-possible replay in
+    step with it: rows are given only up to its time. Only one replay of a run should advance a
+    `ManualClock` (`clock=`); the others follow it.
+    """
+
+    def __init__(
+        self,
+        clips: Iterable[Clip | ServantError],
+        rate: int,
+        channels: tuple[str, ...],
+        *,
+        follow: ManualClock | None = None,
+        **options: object,
+    ) -> None:
+        super().__init__(clips, rate, **options)  # type: ignore[arg-type]
+        self.channels = channels
+        self.follow = follow
+
+    def read(self, timeout: float) -> np.ndarray | None:
+        if self.follow is not None and not self.realtime:
+            due = int(math.floor(self.follow() * self.rate + 1e-9)) - self._produced
+            if due < self.block:
+                time.sleep(min(timeout, 0.001))  # the followed source has not got there yet
+                return None
+        return super().read(timeout)
+
+
+def file_clips(
+    items: Sequence[tuple[str | None, Path]], kind: str, rate: int, loop: bool
+) -> Iterator[Clip | ServantError]:
+    """Each file in turn, resampled (one in memory); a bad one yields its ServantError."""
+    while items:
+        for label, path in items:
+            try:
+                for piece in resampled(read_sample_csv(path, kind), rate):
+                    yield Clip(label, piece)
+            except ServantError as error:
+                yield error
+        if not loop:
+            return
+
+
+def replay_sample_files(
+    files: Sequence[str | Path] | Sequence[tuple[str | None, Path]],
+    kind: str,
+    rate: int | None = None,
+    *,
+    realtime: bool = True,
+    clock: ManualClock | None = None,
+    follow: ManualClock | None = None,
+    loop: bool = False,
+    block_seconds: float = 0.2,
+) -> PacedSamples:
+    """A `SampleSource` playing motion (`kind="imu"`) or ambient CSVs one after another; items
+    are paths, or (scene, path) pairs so that `current_label` says the scene."""
+    items = [f if isinstance(f, tuple) else (None, Path(f)) for f in files]
+    rate = rate or RATES[kind]
+    name = f"replay {items[0][1].name}" if len(items) == 1 else f"replay of {len(items)} files"
+    return PacedSamples(
+        file_clips(items, kind, rate, loop),
+        rate,
+        CHANNELS[kind],
+        follow=follow,
+        realtime=realtime,
+        clock=clock,
+        block_seconds=block_seconds,
+        name=name,
+    )

@@ -1,0 +1,207 @@
+"""The sensor board on a serial port: motion (an MPU-6050) and ambient values, as text lines.
+
+The board is an Arduino running `docs/sensor_board.ino`; the line format is documented in
+`docs/sensors.md`. One port carries both streams, one line per reading, ASCII, `\\n`-ended:
+
+    I,<ms>,<ax>,<ay>,<az>,<gx>,<gy>,<gz>     acceleration m/s², rotation deg/s (IMU_RATE a second)
+    A,<ms>,<lux>,<celsius>,<hPa>             light, temperature, pressure (AMBIENT_RATE a second)
+    # anything                               a comment (the sketch's banner); ignored
+
+`<ms>` is the board's `millis()`. A line that does not parse (line noise, a half line after a
+reset) is skipped and counted in `SensorBoard.bad_lines`, never a fault. A port that vanishes
+(the USB cable pulled) is a `ServantError` in one line; the sources are live, so the engine
+reopens them later.
+
+`SensorBoard(port)` owns the port; `board.source("imu")` and `board.source("ambient")` are the
+two `SampleSource`s over it, which may be read from different threads.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from servant_core.errors import ServantError
+from servant_core.servo.link import PORT_ERRORS, open_serial
+
+IMU_CHANNELS = ("ax", "ay", "az", "gx", "gy", "gz")
+AMBIENT_CHANNELS = ("lux", "celsius", "hpa")
+# the stream each line tag carries, and that stream's columns
+STREAMS: dict[str, tuple[str, tuple[str, ...]]] = {
+    "I": ("imu", IMU_CHANNELS),
+    "A": ("ambient", AMBIENT_CHANNELS),
+}
+TAGS = {kind: tag for tag, (kind, _) in STREAMS.items()}
+CHANNELS = {kind: channels for kind, channels in STREAMS.values()}
+IMU_RATE = 50  # Hz: above twice the 20 Hz top of the vibration band the features look at
+AMBIENT_RATE = 2  # Hz: light, temperature and pressure change slowly
+RATES = {"imu": IMU_RATE, "ambient": AMBIENT_RATE}
+DEFAULT_BAUDRATE = 115200  # 50 lines of ~50 bytes a second use a quarter of it
+MAX_LINE_BYTES = 200  # the longest valid line is under 100 bytes: the rest is noise
+BUFFER_SECONDS = 30.0  # rows kept for a stream nobody reads for a while; older ones are dropped
+
+
+@dataclass(frozen=True)
+class SensorLine:
+    kind: str  # "imu" or "ambient"
+    millis: int
+    values: tuple[float, ...]
+
+
+def parse_line(line: bytes) -> SensorLine | None:
+    """One line of the board (without or with its line ending): a reading, or None for a
+    comment or an empty line. Anything else raises ValueError."""
+    text = line.decode("ascii").strip()
+    if not text or text.startswith("#"):
+        return None
+    fields = text.split(",")
+    if fields[0] not in STREAMS:
+        raise ValueError(f"unknown line tag {fields[0][:8]!r}")
+    kind, channels = STREAMS[fields[0]]
+    if len(fields) != 2 + len(channels):
+        raise ValueError(f"{len(fields)} fields, not {2 + len(channels)}")
+    millis = int(fields[1])
+    values = tuple(float(f) for f in fields[2:])
+    if millis < 0 or not all(math.isfinite(v) for v in values):
+        raise ValueError("a negative time or a value that is not finite")
+    return SensorLine(kind, millis, values)
+
+
+def format_line(kind: str, millis: int, values: np.ndarray | tuple[float, ...]) -> bytes:
+    """The line the board sends for a reading (what the sketch prints, to the same decimals)."""
+    decimals = {"imu": 3, "ambient": 2}[kind]
+    numbers = ",".join(f"{float(v):.{decimals}f}" for v in values)
+    return f"{TAGS[kind]},{int(millis)},{numbers}\n".encode("ascii")
+
+
+class SensorBoard:
+    """The board's serial port, opened while one of its sources is open; lines parsed into rows
+    per stream. `bad_lines` counts the lines skipped since construction."""
+
+    def __init__(
+        self,
+        port: str,
+        *,
+        baudrate: int = DEFAULT_BAUDRATE,
+        imu_rate: int = IMU_RATE,
+        ambient_rate: int = AMBIENT_RATE,
+    ) -> None:
+        self.port = port
+        self.baudrate = baudrate
+        self.rates = {"imu": imu_rate, "ambient": ambient_rate}
+        self.bad_lines = 0
+        self._handle: Any = None
+        self._users: set[str] = set()
+        self._pending = b""
+        self._rows: dict[str, deque[tuple[float, ...]]] = {
+            kind: deque(maxlen=max(1, int(BUFFER_SECONDS * rate)))
+            for kind, rate in self.rates.items()
+        }
+        self._lock = threading.Lock()
+
+    def source(self, kind: str) -> SerialSamples:
+        if kind not in CHANNELS:
+            raise ValueError(f"kind must be one of {sorted(CHANNELS)}")
+        return SerialSamples(self, kind)
+
+    def open(self, kind: str) -> None:
+        with self._lock:
+            if self._handle is None:
+                self._connect()
+            self._users.add(kind)
+
+    def release(self, kind: str) -> None:
+        with self._lock:
+            self._users.discard(kind)
+            self._rows[kind].clear()
+            if not self._users:
+                self._disconnect()
+
+    def take(self, kind: str, timeout: float) -> np.ndarray | None:
+        """The rows of `kind` received so far (float32, (n, channels)), waiting up to `timeout`
+        seconds for the first; None if none came."""
+        if kind not in self._users:
+            raise ValueError(f"the {kind} source is read before it is opened")
+        deadline = time.monotonic() + max(0.0, timeout)
+        while True:
+            with self._lock:
+                if self._handle is None:
+                    self._connect()  # the other stream's fault closed the port: try again
+                rows = self._rows[kind]
+                if rows:
+                    block = np.asarray(rows, dtype=np.float32)
+                    rows.clear()
+                    return block
+                self._pump()
+                if self._rows[kind]:
+                    continue
+            if time.monotonic() >= deadline:
+                return None
+
+    def _connect(self) -> None:
+        self._pending = b""
+        self._handle = open_serial(self.port, self.baudrate)
+
+    def _disconnect(self) -> None:
+        if self._handle is not None:
+            try:
+                self._handle.close()
+            except PORT_ERRORS:
+                pass  # the port is gone already; closing is only tidying up
+        self._handle = None
+
+    def _pump(self) -> None:
+        """Read what the port has (waiting at most its short timeout) and parse whole lines."""
+        handle = self._handle
+        try:
+            data = handle.read(max(1, handle.in_waiting))
+        except PORT_ERRORS as exc:
+            self._disconnect()
+            reason = exc.args[1] if len(exc.args) == 2 else str(exc)
+            raise ServantError(
+                f"{self.port}: the sensor board was lost ({reason}); reconnect it (Servant "
+                "reopens it by itself)"
+            ) from exc
+        *lines, self._pending = (self._pending + data).split(b"\n")
+        if len(self._pending) > MAX_LINE_BYTES:
+            self._pending = b""
+            self.bad_lines += 1
+        for line in lines:
+            try:
+                reading = parse_line(line)
+            except (ValueError, UnicodeDecodeError):
+                self.bad_lines += 1
+                continue
+            if reading is not None and reading.kind in self._users:
+                self._rows[reading.kind].append(reading.values)
+
+
+class SerialSamples:
+    """One stream of a `SensorBoard` as a `SampleSource` (live: a fault is reopened later)."""
+
+    def __init__(self, board: SensorBoard, kind: str) -> None:
+        self.board = board
+        self.kind = kind
+        self.name = f"{kind} sensor on {board.port}"
+        self.rate = board.rates[kind]
+        self.channels = CHANNELS[kind]
+        self.live = True
+
+    def open(self) -> None:
+        self.board.open(self.kind)
+
+    def read(self, timeout: float) -> np.ndarray | None:
+        return self.board.take(self.kind, timeout)
+
+    @property
+    def exhausted(self) -> bool:
+        return False
+
+    def close(self) -> None:
+        self.board.release(self.kind)

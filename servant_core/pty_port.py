@@ -1,0 +1,56 @@
+"""A pseudo-terminal pair standing in for a USB serial device: what the emulators serve on.
+
+The emulator keeps `master`; the host opens `port` (the slave's name, or a symlink to it) with
+pyserial exactly as it would open a real device. Closing the pair is, to the host, the cable
+pulled.
+"""
+
+from __future__ import annotations
+
+import os
+import tty
+from pathlib import Path
+
+from servant_core.errors import ServantError
+
+
+class PtyPort:
+    def __init__(self, link: str | Path | None = None) -> None:
+        """Open a pty pair; with `link`, also make that path a symlink to its port."""
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)  # no echo, no line editing: a serial line carries bytes as they are
+        self.device = os.ttyname(self.slave)
+        self.link: Path | None = None
+        if link is not None:
+            path = Path(link)
+            tmp = path.with_name(f".{path.name}.tmp")
+            try:
+                tmp.unlink(missing_ok=True)
+                tmp.symlink_to(self.device)
+                os.replace(tmp, path)
+            except OSError as exc:
+                self.close()
+                raise ServantError(
+                    f"{path}: cannot make it a link to the emulator's port ({exc.strerror}); "
+                    "give a path in a folder you can write to"
+                ) from exc
+            self.link = path
+
+    @property
+    def port(self) -> str:
+        """What the host opens: the link if one was made, else the device."""
+        return str(self.link) if self.link else self.device
+
+    def close(self) -> None:
+        """Close both sides and remove the link (if it still points here); safe to call twice."""
+        for fd in (self.master, self.slave):
+            if fd >= 0:
+                os.close(fd)
+        self.master = self.slave = -1
+        if (
+            self.link is not None
+            and self.link.is_symlink()
+            and os.readlink(self.link) == self.device
+        ):
+            self.link.unlink()
+        self.link = None
