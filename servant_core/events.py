@@ -52,6 +52,29 @@ class VisualPrediction:
 
 
 @dataclass(frozen=True)
+class SensePrediction:
+    """A window's judgement by a sense other than sound and pictures (motion, ambient)."""
+
+    t: float
+    sense: str  # its name in `servant_core.senses.SENSES`
+    scene: str | None  # None: unknown place
+    confidence: float  # a probability in percent
+    scores: dict[str, float] = field(default_factory=dict)
+    confidence_unit: str | None = None
+
+
+@dataclass(frozen=True)
+class SensorFrame:
+    """The latest readings of a sample sense, for a live trace (a few per second)."""
+
+    t: float
+    sense: str
+    channels: tuple[str, ...]  # the columns of `rows`
+    rows: np.ndarray  # (n, channels) float32, oldest first
+    rate: int  # rows per second
+
+
+@dataclass(frozen=True)
 class FusionState:
     """Where the fusion policy stands: which window is open, how long is left."""
 
@@ -125,6 +148,8 @@ Event = (
     | Palette
     | AcousticPrediction
     | VisualPrediction
+    | SensePrediction
+    | SensorFrame
     | FusionState
     | Decision
     | UnknownScene

@@ -24,8 +24,8 @@ from servant_core.audio import (
 )
 from servant_core.errors import ServantError
 from servant_core.recognisers.base import UNKNOWN
+from servant_core.senses import PICTURE_SUFFIXES, SAMPLE_SENSES
 
-PICTURE_SUFFIXES = (".png", ".jpg", ".jpeg")
 # A webcam frame is under 1 Mpx and a phone photo under 50 Mpx; a header claiming more is
 # damaged or hostile (a 1 MB PNG can claim gigabytes). Checked before decoding.
 MAX_PICTURE_PIXELS = 50_000_000
@@ -47,12 +47,22 @@ class Picture:
     path: Path
 
 
+@dataclass(frozen=True)
+class SampleFile:
+    """A log of a sample sense's readings (`*.imu.csv`, `*.ambient.csv`: `capture.sample_files`)."""
+
+    scene: str
+    path: Path
+
+
 @dataclass
 class SceneLibrary:
     root: Path
     scenes: list[str]
     recordings: list[Recording] = field(default_factory=list)
     pictures: list[Picture] = field(default_factory=list)
+    # each sample sense's logs, by sense name ("motion", "ambient"); senses without any left out
+    samples: dict[str, list[SampleFile]] = field(default_factory=dict)
 
     @classmethod
     def scan(cls, root: str | Path) -> SceneLibrary:
@@ -72,6 +82,7 @@ class SceneLibrary:
         scenes: list[str] = []
         recordings: list[Recording] = []
         pictures: list[Picture] = []
+        samples: dict[str, list[SampleFile]] = {}
         for scene_dir in sorted(
             p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")
         ):
@@ -89,7 +100,13 @@ class SceneLibrary:
                     recordings.append(Recording(scene_dir.name, path))
                 elif suffix in PICTURE_SUFFIXES:
                     pictures.append(Picture(scene_dir.name, path))
-        return cls(root, scenes, recordings, pictures)
+                else:
+                    for sense in SAMPLE_SENSES.values():
+                        if path.name.lower().endswith(sense.suffixes):
+                            samples.setdefault(sense.name, []).append(
+                                SampleFile(scene_dir.name, path)
+                            )
+        return cls(root, scenes, recordings, pictures, samples)
 
     def restricted(self, scenes: Sequence[str]) -> SceneLibrary:
         """The same library with only the named scenes (unknown names are an error)."""
@@ -102,6 +119,7 @@ class SceneLibrary:
             [s for s in self.scenes if s in keep],
             [r for r in self.recordings if r.scene in keep],
             [p for p in self.pictures if p.scene in keep],
+            {sense: [f for f in files if f.scene in keep] for sense, files in self.samples.items()},
         )
 
 

@@ -28,11 +28,11 @@ from servant_core.audio import (
 )
 from servant_core.errors import ServantError
 from servant_core.recognisers import UNKNOWN, Recogniser, methods_for
+from servant_core.senses import ROLE_SENSE
 from servant_core.storage import atomic_save_npz
 
 FORMAT = "servant-model"
 VERSION = 1
-ROLE_SENSE = {"acoustic": "audio", "visual": "image", "motion": "motion", "ambient": "ambient"}
 
 # What a model file may hold, checked before anything is read in full. The largest real model
 # (the paper's FFT centroids, ten scenes) is about 10 MB; these limits leave ample room and keep

@@ -36,9 +36,10 @@ from servant_core.capture.replay import Clip, PacedAudio
 from servant_core.capture.sensors import CHANNELS, RATES
 from servant_core.capture.source import ManualClock
 from servant_core.errors import ServantError
+from servant_core.senses import SAMPLE_SENSES
 from servant_core.storage import atomic_write_text
 
-SUFFIXES = {"imu": ".imu.csv", "ambient": ".ambient.csv"}
+SUFFIXES = {s.stream: s.suffixes[0] for s in SAMPLE_SENSES.values() if s.stream}
 MAX_GAP_S = 1.0  # longer pauses in a log are not interpolated across
 MAX_FILE_BYTES = 512 * 1024 * 1024  # a day of 100 Hz motion is ~500 MB: more is not a log
 G = 9.80665

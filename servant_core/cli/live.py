@@ -28,6 +28,7 @@ from servant_core.events import (
     ErrorEvent,
     Event,
     Notice,
+    SensePrediction,
     UnknownScene,
     VisualPrediction,
 )
@@ -71,6 +72,16 @@ def register(subparsers: Any) -> None:
     )
     run.add_argument("--no-camera", action="store_true", help="do not look")
     run.add_argument(
+        "--imu",
+        help="motion: the sensor board's serial port, a motion log (*.imu.csv, as phone "
+        "sensor-logger apps export) or a folder of them (docs/sensors.md)",
+    )
+    run.add_argument(
+        "--ambient",
+        help="light, temperature and pressure: the sensor board's serial port (it may be the "
+        "--imu one), an *.ambient.csv log or a folder of them",
+    )
+    run.add_argument(
         "--port", help="the arm's serial port (default: Settings; see `servant servo list-ports`)"
     )
     run.add_argument(
@@ -86,7 +97,8 @@ def register(subparsers: Any) -> None:
         "--policy",
         choices=sorted(POLICIES),
         default="parallel",
-        help="fusion: `sequential` is the paper's 30 s / 20 s rule",
+        help="fusion: `sequential` is the paper's 30 s / 20 s rule; `learned` is a small neural "
+        "net over every sense (trained with the model; without one it acts as `parallel`)",
     )
     run.add_argument("--list-devices", action="store_true", help="list input devices and exit")
     _common(run)
@@ -174,6 +186,8 @@ def live_settings(args: argparse.Namespace | None = None) -> LiveSettings:
         camera=None if args.no_camera else (args.camera if args.camera is not None else camera),
         user=user,
         policy=args.policy,
+        imu=args.imu,
+        ambient=args.ambient,
     )
 
 
@@ -229,6 +243,11 @@ def _event_line(event: Event) -> str | None:
         if event.scene is None:  # a confidence in no scene says nothing
             return f"{at} {verb} {place(None)}"
         return f"{at} {verb} {place(event.scene)}  {sense} confidence {confidence}"
+    if isinstance(event, SensePrediction):
+        if event.scene is None:
+            return f"{at} felt ({event.sense}) {place(None)}"
+        confidence = confidence_text(event.confidence, event.confidence_unit)
+        return f"{at} felt ({event.sense}) {place(event.scene)}  confidence {confidence}"
     if isinstance(event, UnknownScene):
         return f"{at} unknown {event.sense} ({event.window_id}), nearest: {event.nearest_scene}"
     if isinstance(event, DeviceStatus):

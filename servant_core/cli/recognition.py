@@ -11,6 +11,7 @@ from typing import Any, cast
 from servant_core.audio import DEFAULT_RATE, DEFAULT_WINDOW_SECONDS, cut_windows, read_audio
 from servant_core.cli import emit, one_line, options
 from servant_core.engine import FRESH_METHODS, decision_unit
+from servant_core.engine.learning import refit_samples
 from servant_core.errors import ServantError
 from servant_core.evaluate import (
     DEFAULT_SHOTS,
@@ -37,6 +38,7 @@ from servant_core.recognisers import (
     make_audio_recogniser,
     make_recogniser,
 )
+from servant_core.senses import SAMPLE_SENSES
 from servant_core.storage import data_dir
 
 
@@ -282,16 +284,35 @@ def cmd_train(args: argparse.Namespace) -> int:
             "n_pictures": len(kept),
         }
         summary["warnings"] += getattr(getattr(visual, "labels_", None), "warnings", list)()
+    for sense, files in library.samples.items():
+        if len({f.scene for f in files}) < 2:
+            continue
+        stream = SAMPLE_SENSES[sense].stream
+        model = refit_samples(
+            files,
+            stream or sense,
+            make_recogniser(sense, FRESH_METHODS[sense]),
+            args.window,
+            on_error or _raise,
+            Progress(f"reading {sense} logs"),
+        )
+        if model is not None:
+            recognisers[sense] = model
+            summary[sense] = {"method": model.method, "scenes": model.scenes_}
     if not recognisers:
         raise ServantError(
-            f"{args.root}: training needs at least two scene folders with recordings or pictures"
+            f"{args.root}: training needs at least two scene folders with recordings, pictures "
+            "or sensor logs"
         )
     output = args.output or data_dir() / "models" / "model.npz"
     save_model(output, recognisers)
     summary["model"] = str(output)
     lines = [f"model written to {output}"]
-    for role in ("acoustic", "visual"):
-        if role in summary:
+    for role in ("acoustic", "visual", *SAMPLE_SENSES):
+        if role in SAMPLE_SENSES and role in summary:
+            s = summary[role]
+            lines.append(f"{role}: {s['method']} on its logs, scenes {', '.join(s['scenes'])}")
+        elif role in summary:
             s = summary[role]
             count = s.get("n_windows", s.get("n_pictures"))
             unit = "windows" if "n_windows" in s else "pictures"
@@ -301,6 +322,10 @@ def cmd_train(args: argparse.Namespace) -> int:
     lines += [f"warning: {w}" for w in summary["warnings"]]
     emit(args, summary, "\n".join(lines))
     return 0
+
+
+def _raise(error: ServantError) -> None:
+    raise error
 
 
 def cmd_predict(args: argparse.Namespace) -> int:

@@ -32,12 +32,18 @@ from typing import Any
 import numpy as np
 
 from servant_core.audio import DEFAULT_WINDOW_SECONDS, resample
-from servant_core.capture.source import AudioSource, FrameSource, ManualClock, MonotonicClock
+from servant_core.capture.source import (
+    AudioSource,
+    FrameSource,
+    ManualClock,
+    MonotonicClock,
+    SampleSource,
+)
 from servant_core.engine import learning
 from servant_core.engine.arm import ArmControl, PoseFor
 from servant_core.engine.bus import EventBus, Subscriber
 from servant_core.engine.learning import Kept, Unknowns, progress_part
-from servant_core.engine.loop import SPECTRUM_FPS, SPECTRUM_SIZE, Hearing, Sight
+from servant_core.engine.loop import SPECTRUM_FPS, SPECTRUM_SIZE, Feeling, Hearing, Sight
 from servant_core.errors import ServantError
 from servant_core.events import (
     AcousticPrediction,
@@ -45,6 +51,7 @@ from servant_core.events import (
     DeviceStatus,
     Notice,
     Palette,
+    SensePrediction,
     UnknownScene,
     VisualPrediction,
 )
@@ -53,6 +60,7 @@ from servant_core.fusion import FusionConfig, FusionPolicy, SequentialFusion
 from servant_core.fusion.smoothing import SceneSmoother
 from servant_core.library import SceneLibrary
 from servant_core.recognisers import FRESH_METHODS, UNKNOWN, Recogniser
+from servant_core.senses import SAMPLE_SENSES, SENSES
 from servant_core.storage import data_dir
 
 log = logging.getLogger(__name__)
@@ -71,6 +79,8 @@ class Engine:
     - `audio`, `camera`: an `AudioSource` / `FrameSource` (see `servant_core.capture.source`),
       or None for a sense that is absent.
     - `acoustic`, `visual`: fitted recognisers (see `servant_core.recognisers.base`), or None.
+    - `samples`: {sense: `SampleSource`} for the sample senses (`servant_core.senses`: motion,
+      ambient), and `sample_recognisers`: {sense: fitted recogniser} to judge their windows.
     - `fusion`: a `FusionPolicy` (default: the paper's `SequentialFusion`).
     - `clock`: the engine's time in seconds (default: monotonic seconds since construction).
     - `window_seconds`: the window the acoustic recogniser judges (default: its own, else 5 s).
@@ -110,11 +120,18 @@ class Engine:
         fresh_methods: Mapping[str, str] | None = None,
         confidence_threshold: float | None = None,
         smoother: SceneSmoother | None = None,
+        samples: Mapping[str, SampleSource] | None = None,
+        sample_recognisers: Mapping[str, Recogniser] | None = None,
     ) -> None:
         self.audio = audio
         self.camera = camera
         self.acoustic = acoustic
         self.visual = visual
+        self.samples = dict(samples or {})
+        self.sample_recognisers = dict(sample_recognisers or {})
+        unknown = sorted(set(self.samples) - set(SAMPLE_SENSES))
+        if unknown:
+            raise ValueError(f"no sample sense named {', '.join(unknown)}")
         self.fusion: FusionPolicy = fusion if fusion is not None else SequentialFusion()
         self.clock: Callable[[], float] = clock or MonotonicClock()
         self.window_seconds = float(
@@ -123,7 +140,7 @@ class Engine:
         self.reopen_seconds = reopen_seconds
         self.library_root = Path(library_root) if library_root else None
         self.model_path = Path(model_path) if model_path else None
-        self.fresh_methods = dict(fresh_methods or FRESH_METHODS)
+        self.fresh_methods = {**FRESH_METHODS, **(fresh_methods or {})}
         self.retrain_needed = False
         self.confidence_threshold = confidence_threshold
         self.smoother = smoother
@@ -146,6 +163,19 @@ class Engine:
             else None
         )
         self._sight = Sight(camera, self._bus, reopen_seconds=reopen_seconds) if camera else None
+        self._feelings = [
+            Feeling(
+                SAMPLE_SENSES[sense],
+                source,
+                self._bus,
+                lambda name, window, rate: self._guarded(
+                    f"{name} prediction", self._on_samples, name, window, rate
+                ),
+                window_seconds=self.window_seconds,
+                reopen_seconds=reopen_seconds,
+            )
+            for sense, source in self.samples.items()
+        ]
         self._lock = threading.RLock()  # models, fusion, scores
         self._update_lock = threading.Lock()  # one model update (retrain, fold-in) at a time
         self._stop = threading.Event()
@@ -156,6 +186,7 @@ class Engine:
         self._notes: list[str] = []  # said to every subscriber when the senses open
         self._opened = False
         self._scores: dict[str, dict[str, float]] = {"acoustic": {}, "visual": {}}
+        self._scores.update({SENSES[sense].role: {} for sense in self.samples})
         self._unknowns = Unknowns()
 
     # --- subscribers and status -------------------------------------------------------------
@@ -254,6 +285,7 @@ class Engine:
         self._opened = True
         with self._lock:
             untrained = self.acoustic is None and self.visual is None
+            untrained = untrained and not self.sample_recognisers
         for message in [*self._notes, *([NO_MODEL] if untrained else [])]:
             self._emit(Notice(self.clock(), message))
         self._emit(self.fusion.state(self.clock()))
@@ -261,6 +293,8 @@ class Engine:
             self._hearing.open()
         if self._sight is not None:
             self._sight.open()
+        for feeling in self._feelings:
+            feeling.open()
 
     def _close_senses(self) -> None:
         self._opened = False
@@ -268,6 +302,8 @@ class Engine:
             self._hearing.close()
         if self._sight is not None:
             self._sight.close()
+        for feeling in self._feelings:
+            feeling.close()
 
     # --- the sense thread ---------------------------------------------------------------------
 
@@ -280,20 +316,29 @@ class Engine:
             self._error(f"engine: the sense thread stopped ({type(exc).__name__}: {exc})")
 
     def _step(self, timeout: float = 0.05) -> None:
-        """One turn: take an audio block if one comes within `timeout`, then let fusion look."""
+        """One turn: take an audio block if one comes within `timeout`, the readings of the sample
+        senses, then let fusion look. Without working audio, the first sample sense waits."""
         hearing = self._hearing
+        waited = False
         if hearing is not None and hearing.ok:
             if not hearing.listen(timeout):
                 self._finished.set()
                 return
-        else:
-            if isinstance(self.clock, ManualClock):
-                # Nothing moves a manual clock but the audio: without audio there is no time.
+            waited = True
+        for feeling in self._feelings:
+            feeling.feel(0.0 if waited else timeout)
+            waited = waited or feeling.ok
+        if not waited:
+            if isinstance(self.clock, ManualClock) and not self._feelings:
+                # Nothing moves a manual clock but a replay: without one there is no time.
                 self._finished.set()
                 return
             self._stop.wait(timeout)
             if hearing is not None:
                 hearing.reopen_if_due(self.clock())
+        if hearing is None and self._feelings and all(f.finished for f in self._feelings):
+            self._finished.set()
+            return
         self._look()
 
     def _guarded(self, what: str, fn: Callable[..., None], *args: Any) -> None:
@@ -324,7 +369,39 @@ class Engine:
         if not known:
             self._ask_label(Kept("audio", window, rate), scores, t)
         with self._lock:
-            events = self.fusion.on_acoustic(scene if known else None, confidence, t)
+            events = self._judged("audio", scene if known else None, confidence, t, scores)
+        self._handle(events)
+
+    def _judged(
+        self, sense: str, scene: str | None, confidence: float, t: float, scores: dict[str, float]
+    ) -> list[Any]:
+        """A sense's judgement to the fusion policy (called under `_lock`): a policy that takes
+        every sense (`on_sense`, the learned one) hears them all with their probabilities; the
+        rule policies hear sound and pictures only."""
+        on_sense = getattr(self.fusion, "on_sense", None)
+        if on_sense is not None:
+            return list(on_sense(sense, scene, confidence, t, scores))
+        if sense == "audio":
+            return self.fusion.on_acoustic(scene, confidence, t)
+        if sense == "image":
+            return self.fusion.on_visual(scene, confidence, t)
+        return []
+
+    def _on_samples(self, sense: str, window: np.ndarray, rate: int) -> None:
+        with self._lock:
+            recogniser = self.sample_recognisers.get(sense)
+        if recogniser is None:
+            return
+        t = self.clock()
+        rows = learning.resampled_rows(window, rate, int(getattr(recogniser, "rate", rate)))
+        scene, confidence, scores = _predict(recogniser, recogniser.featurize([rows]))
+        known = scene != UNKNOWN
+        with self._lock:
+            self._scores[SENSES[sense].role] = scores
+        unit = recogniser.confidence_unit
+        self._emit(SensePrediction(t, sense, scene if known else None, confidence, scores, unit))
+        with self._lock:
+            events = self._judged(sense, scene if known else None, confidence, t, scores)
         self._handle(events)
 
     def _forget_windows(self) -> None:
@@ -368,7 +445,7 @@ class Engine:
         known = scene != UNKNOWN
         with self._lock:
             self._scores["visual"] = scores
-            events = self.fusion.on_visual(scene if known else None, confidence, t)
+            events = self._judged("image", scene if known else None, confidence, t, scores)
         unit = visual.confidence_unit
         self._emit(VisualPrediction(t, scene if known else None, confidence, scores, unit))
         # The decision (and the arm's move) first; the palette is only for show.
@@ -467,6 +544,23 @@ class Engine:
             raise ServantError("microphone: no sound to record; check the microphone (see status)")
         return self._hearing.record(seconds, timeout)
 
+    def record_samples(
+        self, sense: str, seconds: float = DEFAULT_WINDOW_SECONDS, timeout: float | None = None
+    ) -> tuple[np.ndarray, int]:
+        """Record the next `seconds` of a sample sense's readings from now: ((n, channels)
+        float32, rows per second). ServantError if the sense is not in use or not working."""
+        if not self.running:
+            raise ServantError("engine: not running; start it before recording")
+        for feeling in self._feelings:
+            if feeling.sense.name == sense:
+                return feeling.record(seconds, timeout), feeling.source.rate
+        raise ServantError(f"{sense}: not in use; start with its sensor (e.g. --imu PORT)")
+
+    @property
+    def sample_senses(self) -> list[str]:
+        """The sample senses in use (with a source), by name."""
+        return list(self.samples)
+
     def take_picture(self) -> np.ndarray:
         """A picture from the camera now (BGR uint8); ServantError if there is none."""
         if self._sight is None:
@@ -489,8 +583,9 @@ class Engine:
         library: SceneLibrary | str | Path,
         on_progress: Callable[[int, int], None] | None = None,
     ) -> None:
-        """Refit copies of both recognisers on a scene library, then swap them in (the senses keep
-        running on the old ones meanwhile). A sense without a recogniser gets a new one of its
+        """Refit copies of the recognisers on a scene library (sound, pictures, and each sample
+        sense with logs in it), then swap them in (the senses keep running on the old ones
+        meanwhile). A sense without a recogniser gets a new one of its
         `fresh_methods` method. Unreadable files are reported and skipped. A sense that cannot
         be trained (e.g. pictures of one scene only) is reported and keeps its recogniser while
         the other is retrained; if neither can be, the first reason is raised. `on_progress(done,
@@ -502,7 +597,8 @@ class Engine:
                 acoustic, visual = self.acoustic, self.visual
             new_acoustic = new_visual = None
             failures: list[ServantError] = []
-            total, heard = len(library.recordings) + len(library.pictures), len(library.recordings)
+            heard, seen = len(library.recordings), len(library.pictures)
+            total = heard + seen + sum(len(files) for files in library.samples.values())
             try:
                 new_acoustic = learning.refit_audio(
                     library,
@@ -522,7 +618,10 @@ class Engine:
                 )
             except ServantError as error:
                 failures.append(ServantError(f"retrain (pictures): {error}"))
-            if new_acoustic is None and new_visual is None:
+            new_samples = self._refit_samples(
+                library, failures, on_progress, offset=heard + seen, total=total
+            )
+            if new_acoustic is None and new_visual is None and not new_samples:
                 if failures:
                     raise failures[0]
                 return
@@ -533,8 +632,41 @@ class Engine:
                     self.acoustic = new_acoustic
                     self._forget_windows()
                 self.visual = new_visual or self.visual
+                self.sample_recognisers.update(new_samples)
                 self.retrain_needed = False
             self._save_models()
+
+    def _refit_samples(
+        self,
+        library: SceneLibrary,
+        failures: list[ServantError],
+        on_progress: Callable[[int, int], None] | None,
+        offset: int,
+        total: int,
+    ) -> dict[str, Recogniser]:
+        """Refitted copies (or fresh ones) for each sample sense with logs in the library."""
+        fitted: dict[str, Recogniser] = {}
+        for sense, files in library.samples.items():
+            with self._lock:
+                current = self.sample_recognisers.get(sense)
+            stream = SAMPLE_SENSES[sense].stream
+            assert stream is not None
+            try:
+                model = learning.refit_samples(
+                    files,
+                    stream,
+                    learning.copy_or_fresh(current, sense, self.fresh_methods[sense]),
+                    self.window_seconds,
+                    self._report_error,
+                    progress_part(on_progress, offset, total),
+                )
+            except ServantError as error:
+                failures.append(ServantError(f"retrain ({sense}): {error}"))
+                model = None
+            if model is not None:
+                fitted[sense] = model
+            offset += len(files)
+        return fitted
 
     def _report_error(self, error: ServantError) -> None:
         self._error(str(error))
@@ -578,6 +710,7 @@ class Engine:
             return
         with self._lock:
             models = {"acoustic": self.acoustic, "visual": self.visual}
+            models.update({SENSES[s].role: m for s, m in self.sample_recognisers.items()})
         learning.save_models(self.model_path, models, self._report_error)
 
 

@@ -17,6 +17,7 @@ from servant_core.engine.core import Engine, fusion_config
 from servant_core.errors import ServantError
 from servant_core.fusion import POLICIES, FusionPolicy, SequentialFusion
 from servant_core.fusion.smoothing import STEADY_FLOOR, STEADY_STAY, SceneSmoother
+from servant_core.senses import SAMPLE_SENSES, SENSES
 
 
 def build_demo_engine(
@@ -113,6 +114,8 @@ class LiveSettings:
     `policy`: the fusion policy's name (`servant_core.fusion.POLICIES`).
     `learner`: the action learner file teach mode trains (None: `default_learner_path()`, if
     there is one yet).
+    `imu`, `ambient`: the sensor board's serial port, a log (`*.imu.csv`, `*.ambient.csv`) or a
+    folder of logs, for the motion and ambient senses (None: not used).
     """
 
     model: str | Path | None = None
@@ -125,6 +128,8 @@ class LiveSettings:
     user: Any = None
     policy: str = "parallel"
     learner: str | Path | None = None
+    imu: str | None = None
+    ambient: str | None = None
 
 
 def build_live_engine(
@@ -137,12 +142,15 @@ def build_live_engine(
     from servant_core.actions.learner import ActionLearner, default_learner_path
     from servant_core.capture.camera import Camera
     from servant_core.capture.microphone import Microphone
+    from servant_core.capture.sensor_sources import sensor_sources
     from servant_core.modelfile import load_model
     from servant_core.settings import Settings
 
     settings = settings or LiveSettings()
     user = settings.user or Settings()
     models = load_model(settings.model) if settings.model else {}
+    streams = sensor_sources({"imu": settings.imu, "ambient": settings.ambient})
+    samples = {s.name: streams[s.stream] for s in SAMPLE_SENSES.values() if s.stream in streams}
     engine = Engine(
         audio=Microphone(settings.microphone, settings.rate) if settings.use_microphone else None,
         camera=Camera(settings.camera) if settings.camera is not None else None,
@@ -153,6 +161,8 @@ def build_live_engine(
         model_path=settings.model_path or settings.model,
         confidence_threshold=user.confidence_threshold,
         smoother=steady(),
+        samples=samples,
+        sample_recognisers={s: models[SENSES[s].role] for s in samples if SENSES[s].role in models},
     )
     engine.connect_arm(user.serial_port, user.protocol, user.joints)
     learner_file = Path(settings.learner or default_learner_path())

@@ -13,7 +13,7 @@ import re
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -22,8 +22,11 @@ import cv2
 import numpy as np
 
 from servant_core.audio import DEFAULT_RATE, resample, write_wav
+from servant_core.capture.sample_files import read_samples
+from servant_core.capture.sensors import RATES
 from servant_core.errors import ServantError
-from servant_core.library import SceneLibrary, featurize_recordings, read_pictures
+from servant_core.evaluate_motion import cut_sample_windows
+from servant_core.library import SampleFile, SceneLibrary, featurize_recordings, read_pictures
 from servant_core.modelfile import save_model
 from servant_core.recognisers import Recogniser, make_recogniser
 from servant_core.storage import atomic_write_bytes
@@ -162,3 +165,39 @@ def progress_part(on_progress: OnProgress | None, offset: int, total: int) -> On
         return None
     report = on_progress
     return lambda done, _part_total: report(offset + done, total)
+
+
+def refit_samples(
+    files: Sequence[SampleFile],
+    stream: str,
+    model: Any,
+    window_seconds: float,
+    on_error: OnError,
+    on_progress: OnProgress | None = None,
+) -> Any:
+    """`model` fitted on the windows of a sample sense's logs; None if none gives a window."""
+    rate = int(getattr(model, "rate", RATES[stream]))
+    windows: list[np.ndarray] = []
+    scenes: list[str] = []
+    for done, file in enumerate(files, start=1):
+        try:
+            cut = cut_sample_windows(read_samples(file.path, stream, rate), rate, window_seconds)
+        except ServantError as error:
+            on_error(error)
+            cut = []
+        windows += cut
+        scenes += [file.scene] * len(cut)
+        if on_progress is not None:
+            on_progress(done, len(files))
+    if not windows:
+        return None
+    return model.fit(model.featurize(windows), scenes)
+
+
+def resampled_rows(rows: np.ndarray, rate: int, to_rate: int) -> np.ndarray:
+    """Readings (n, channels) at `rate` on a grid at `to_rate` (linear interpolation)."""
+    if rate == to_rate or not len(rows):
+        return rows
+    t = np.arange(len(rows)) / rate
+    grid = np.arange(int(len(rows) * to_rate / rate)) / to_rate
+    return np.stack([np.interp(grid, t, rows[:, c]) for c in range(rows.shape[1])], axis=1)

@@ -15,10 +15,11 @@ from collections.abc import Callable
 import numpy as np
 
 from servant_core.capture.ring import RingBuffer
-from servant_core.capture.source import AudioSource, FrameSource
+from servant_core.capture.source import AudioSource, FrameSource, SampleSource
 from servant_core.engine.bus import EventBus
 from servant_core.errors import ServantError
-from servant_core.events import SpectrumFrame
+from servant_core.events import SensorFrame, SpectrumFrame
+from servant_core.senses import Sense
 
 SPECTRUM_SIZE = 2048
 SPECTRUM_FPS = 30.0
@@ -205,3 +206,128 @@ class Sight:
         self.ok = False
         self._retry_at = self.bus.clock() + self.reopen_seconds
         self.bus.report("camera", False, str(error))
+
+
+class Feeling:
+    """A sample sense's source (motion, ambient readings), cut into windows like the sound.
+
+    `on_window(sense, window, rate)` is called on the sense thread for each `window_seconds` of
+    readings; a `SensorFrame` of the newest readings goes out at most `FRAMES_PER_SECOND` times a
+    second for a live trace. The last `RING_SECONDS` are kept so teach mode can record them.
+    """
+
+    FRAMES_PER_SECOND = 5.0
+
+    def __init__(
+        self,
+        sense: Sense,
+        source: SampleSource,
+        bus: EventBus,
+        on_window: Callable[[str, np.ndarray, int], None],
+        *,
+        window_seconds: float,
+        reopen_seconds: float,
+    ) -> None:
+        self.sense = sense
+        self.source = source
+        self.bus = bus
+        self.on_window = on_window
+        self.window_seconds = window_seconds
+        self.reopen_seconds = reopen_seconds
+        self.ok = False
+        self._rows: list[np.ndarray] = []  # blocks not yet cut into a window
+        self._kept: list[np.ndarray] = []  # the last RING_SECONDS of blocks, for recording
+        self._arrived = threading.Condition()
+        self._total = 0
+        self._retry_at = 0.0
+        self._frame_at = -1.0
+
+    @property
+    def device(self) -> str:
+        return self.sense.device
+
+    def open(self) -> None:
+        try:
+            self.source.open()
+        except ServantError as error:
+            self.ok = False
+            self._retry_at = self.bus.clock() + self.reopen_seconds
+            self.bus.report(self.device, False, str(error))
+            return
+        self._rows = []  # windows start afresh after (re)opening, as the sound's do
+        self.ok = True
+        self.bus.report(self.device, True, f"{self.source.name}: reading at {self.source.rate} Hz")
+
+    def close(self) -> None:
+        self.source.close()
+        self.ok = False
+
+    def reopen_if_due(self, t: float) -> None:
+        if not self.ok and t >= self._retry_at:
+            self.open()
+
+    @property
+    def finished(self) -> bool:
+        return self.source.exhausted
+
+    def feel(self, timeout: float) -> None:
+        """Take what readings came within `timeout` (0: only those already there)."""
+        if not self.ok:
+            self.reopen_if_due(self.bus.clock())
+            return
+        try:
+            block = self.source.read(timeout)
+        except ServantError as error:
+            if not getattr(self.source, "live", False):
+                self.bus.error(str(error))
+                return
+            self.bus.report(self.device, False, str(error))
+            self.close()
+            self._retry_at = self.bus.clock() + self.reopen_seconds
+            return
+        if block is None or not len(block):
+            if self.source.exhausted:
+                self.bus.report(self.device, False, f"{self.source.name}: finished")
+            return
+        block = np.asarray(block, dtype=np.float32).reshape(len(block), -1)
+        self._keep(block)
+        t = self.bus.clock()
+        if t - self._frame_at >= 1.0 / self.FRAMES_PER_SECOND:
+            self._frame_at = t
+            recent = np.concatenate(self._kept)[-int(self.source.rate * 10) :]
+            channels = tuple(getattr(self.source, "channels", ()))
+            self.bus.emit(SensorFrame(t, self.sense.name, channels, recent, self.source.rate))
+        self._rows.append(block)
+        size = int(round(self.window_seconds * self.source.rate))
+        have = sum(len(b) for b in self._rows)
+        while have >= size:
+            rows = np.concatenate(self._rows)
+            window, rest = rows[:size], rows[size:]
+            self._rows = [rest] if len(rest) else []
+            have = len(rest)
+            self.on_window(self.sense.name, window, self.source.rate)
+
+    def _keep(self, block: np.ndarray) -> None:
+        with self._arrived:
+            self._kept.append(block)
+            self._total += len(block)
+            limit = int(RING_SECONDS * self.source.rate)
+            while sum(len(b) for b in self._kept) - len(self._kept[0]) >= limit:
+                self._kept.pop(0)
+            self._arrived.notify_all()
+
+    def record(self, seconds: float, timeout: float | None) -> np.ndarray:
+        """The next `seconds` of readings from now (blocks until they have arrived)."""
+        if not self.ok:
+            raise ServantError(f"{self.device}: no readings to record; check it (see status)")
+        count = int(round(seconds * self.source.rate))
+        with self._arrived:
+            end = self._total + count
+            arrived = self._arrived.wait_for(
+                lambda: self._total >= end, timeout if timeout is not None else 2 * seconds + 2
+            )
+            if not arrived:
+                raise ServantError(f"{self.source.name}: the readings stopped; try again")
+            rows = np.concatenate(self._kept)
+            start = len(rows) - (self._total - end) - count
+            return rows[start : start + count].copy()
