@@ -1,0 +1,151 @@
+"""The motion and ambient senses through the engine, on the paths a wearer takes: logs replayed
+by `servant run --imu FILE`, the sensor board's emulator on a real pty, retrain from a library
+with logs, saving and loading them in the model file, and teach mode's recording."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from servant_core.capture.sample_files import replay_sample_files
+from servant_core.capture.sensor_emulator import SensorEmulator, script_scene
+from servant_core.capture.sensor_sources import sensor_sources
+from servant_core.capture.source import ManualClock
+from servant_core.demo.motion_synth import write_sensor_library
+from servant_core.engine import Engine
+from servant_core.errors import ServantError
+from servant_core.events import DeviceStatus, SensePrediction, SensorFrame
+from servant_core.library import SceneLibrary
+from servant_core.modelfile import load_model
+from tests.conftest import REPO, servant
+
+
+@pytest.fixture(scope="module")
+def sensor_model(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A model of the motion and ambient senses trained by `servant train` on synthesised logs."""
+    base = tmp_path_factory.mktemp("sensors")
+    write_sensor_library(base / "library", seed=0, windows_per_scene=8)
+    model = base / "model.npz"
+    done = servant("train", str(base / "library"), "-o", str(model))
+    assert done.returncode == 0, done.stderr
+    assert "motion: kmeans" in done.stdout and "ambient: kmeans" in done.stdout
+    return model
+
+
+def test_servant_run_replays_motion_and_ambient_logs_end_to_end(sensor_model, tmp_path):
+    """`servant run --headless --imu DIR --ambient DIR`: each 5 s window of the logs is judged,
+    in the order the logs play (coffee, gym, street: two files each, 5 s a file)."""
+    write_sensor_library(tmp_path / "walk", seed=9, windows_per_scene=2)
+    args = ["--model", str(sensor_model), "--no-mic", "--no-camera"]
+    args += ["--imu", str(tmp_path / "walk"), "--ambient", str(tmp_path / "walk")]
+    done = servant("run", "--headless", *args, "--duration", "31")
+    assert done.returncode == 0, done.stderr
+    felt = re.findall(r"felt \(motion\) (\w+)", done.stdout)
+    assert felt[:6] == ["coffee", "coffee", "gym", "gym", "street", "street"], done.stdout
+    ambient = re.findall(r"felt \(ambient\) (\w+)", done.stdout)
+    assert len(ambient) >= 5 and sum(a == e for a, e in zip(ambient, felt, strict=False)) >= 4
+
+
+def test_servant_run_reads_the_sensor_board_through_the_emulators_pty(sensor_model):
+    """The real serial path: `servant emulate-sensors` on a pty, `servant run --imu PORT`."""
+    link = Path(f"/tmp/servant-test-sensors-{time.monotonic_ns()}")
+    emulator = subprocess.Popen(
+        [sys.executable, "-m", "servant_tui", "emulate-sensors", "--script", "gym:600"]
+        + ["--link", str(link)],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 30
+        while not link.exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert link.exists(), emulator.stderr.read() if emulator.poll() is not None else ""
+        done = servant(
+            "run", "--headless", "--model", str(sensor_model), "--no-mic", "--no-camera",
+            "--imu", str(link), "--ambient", str(link), "--duration", "12",
+        )  # fmt: skip
+    finally:
+        emulator.terminate()
+        emulator.wait(10)
+    assert done.returncode == 0, done.stderr
+    assert re.search(rf"imu ok: imu sensor on {re.escape(str(link))}", done.stdout), done.stdout
+    felt = re.findall(r"felt \(motion\) (\w+)", done.stdout)
+    assert len(felt) >= 2 and set(felt) == {"gym"}, done.stdout
+
+
+def test_a_sensor_board_unplugged_is_reported_and_the_engine_goes_on(sensor_model):
+    emulator = SensorEmulator(script_scene([("street", 1000.0)]), seed=2)
+    port = emulator.start()
+    models = load_model(sensor_model)
+    sources = sensor_sources({"imu": port})
+    engine = Engine(samples={"motion": sources["imu"]}, sample_recognisers=models)
+    events: list = []
+    engine.subscribe(events.append)
+    with engine:
+        deadline = time.monotonic() + 20
+        while not any(isinstance(e, SensePrediction) for e in events):
+            assert time.monotonic() < deadline, events
+            time.sleep(0.05)
+        emulator.stop()
+        while not any(
+            isinstance(e, DeviceStatus) and e.device == "imu" and not e.ok for e in events
+        ):
+            assert time.monotonic() < deadline + 10, events
+            time.sleep(0.05)
+        assert engine.running  # the loss is a status, not the end of the engine
+    said = [e for e in events if isinstance(e, SensePrediction)]
+    assert said[0].scene == "street" and said[0].sense == "motion"
+    lost = next(e for e in events if isinstance(e, DeviceStatus) and e.device == "imu" and not e.ok)
+    assert "\n" not in lost.message and port in lost.message
+    assert any(isinstance(e, SensorFrame) and e.rows.shape[1] == 6 for e in events)
+
+
+def test_retrain_fits_the_sample_senses_of_a_library_and_saves_them(tmp_path):
+    root = write_sensor_library(tmp_path / "library", seed=1, windows_per_scene=6)
+    library = SceneLibrary.scan(root)
+    assert {s: len(f) for s, f in library.samples.items()} == {"motion": 18, "ambient": 18}
+    model_path = tmp_path / "model.npz"
+    engine = Engine(model_path=model_path)
+    progress: list[tuple[int, int]] = []
+    engine.retrain(library, on_progress=lambda done, total: progress.append((done, total)))
+    assert sorted(engine.sample_recognisers) == ["ambient", "motion"]
+    assert progress[-1] == (36, 36)  # one bar over both senses' logs
+    saved = load_model(model_path)
+    assert sorted(saved) == ["ambient", "motion"]
+    # and the saved motion recogniser names the scene of a fresh log
+    fresh = write_sensor_library(tmp_path / "fresh", seed=7, windows_per_scene=1)
+    clock = ManualClock()
+    replay = replay_sample_files(
+        sorted(Path(fresh).rglob("*.imu.csv")), "imu", realtime=False, clock=clock
+    )
+    engine = Engine(
+        samples={"motion": replay}, sample_recognisers={"motion": saved["motion"]}, clock=clock
+    )
+    said: list = []
+    engine.subscribe(lambda e: said.append(e) if isinstance(e, SensePrediction) else None)
+    engine.run_until(1e9)
+    assert [e.scene for e in said] == ["coffee", "gym", "street"]
+
+
+def test_record_samples_gives_the_next_seconds_of_readings():
+    emulator = SensorEmulator(script_scene([("coffee", 1000.0)]), seed=4)
+    port = emulator.start()
+    engine = Engine(samples={"motion": sensor_sources({"imu": port})["imu"]})
+    try:
+        with engine:
+            rows, rate = engine.record_samples("motion", 1.0, timeout=10)
+            with pytest.raises(ServantError, match="ambient: not in use"):
+                engine.record_samples("ambient", 1.0, timeout=1)
+    finally:
+        emulator.stop()
+    assert rate == 50 and rows.shape == (50, 6) and np.isfinite(rows).all()
+    # a still café: gravity, about 9.8 m/s²
+    assert 9.0 < float(np.linalg.norm(rows[:, :3], axis=1).mean()) < 10.6
