@@ -50,11 +50,15 @@ def build_demo_engine(
         train_demo_recognisers,
         write_demo_library,
     )
+    from servant_core.demo.sensors import demo_sensor_sources, train_sensor_recognisers
 
     if not realtime:
         clock = clock if isinstance(clock, ManualClock) else ManualClock()
     clock = clock or MonotonicClock()
     acoustic, visual = train_demo_recognisers(seed, paper=paper, on_progress=on_progress)
+    samples, stop_emulator = demo_sensor_sources(
+        seed, clock=clock if isinstance(clock, ManualClock) and not realtime else None
+    )
     if library_root is not None:
         write_demo_library(library_root, seed)
     audio = demo_audio(seed, realtime=realtime, clock=clock if not realtime else None)
@@ -69,7 +73,11 @@ def build_demo_engine(
         clock=clock,
         library_root=library_root,
         smoother=None if paper else steady(),
+        samples=samples,
+        sample_recognisers=train_sensor_recognisers(seed),
     )
+    if stop_emulator is not None:
+        engine.add_cleanup(stop_emulator)
     if arm:
         from servant_core.demo.arm import demo_learner, start_demo_arm
 

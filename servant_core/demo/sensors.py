@@ -1,0 +1,81 @@
+"""The demo's motion and ambient senses: the wearer sits in the café, bounces on the court and
+walks down the street (`demo.motion_synth`), with each place's light, warmth and pressure.
+
+At real speed they come from the sensor board's emulator on a pty, read through pyserial exactly
+as a real board would be (`capture.sensor_emulator`, `capture.sensors`); as fast as possible
+(a `ManualClock`), from the same synthesis window by window, following the sound's clock, so a
+fast run is the same on every machine. The motion follows where the wearer *is* — the scene
+heard — even while the camera still shows the café.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable, Iterator
+
+import numpy as np
+
+from servant_core.audio import DEFAULT_WINDOW_SECONDS
+from servant_core.capture.replay import Clip
+from servant_core.capture.sample_files import PacedSamples
+from servant_core.capture.sensor_emulator import SENSOR_STREAM, SensorEmulator, script_scene
+from servant_core.capture.sensors import CHANNELS, RATES, SensorBoard
+from servant_core.capture.source import ManualClock, SampleSource
+from servant_core.demo.motion_synth import DEMO_SCENES, synth_ambient, synth_motion
+from servant_core.demo.scenes import WALK, Segment, segment_at
+from servant_core.recognisers import FRESH_METHODS, Recogniser, make_recogniser
+
+TRAIN_STREAM = 7  # the seed word of the sensors' training windows: never the walk's
+SYNTH: dict[str, Callable[..., np.ndarray]] = {"motion": synth_motion, "ambient": synth_ambient}
+STREAM = {"motion": "imu", "ambient": "ambient"}
+
+
+def train_sensor_recognisers(seed: int = 0, windows_per_scene: int = 12) -> dict[str, Recogniser]:
+    """The motion and ambient recognisers of the demo, fitted on fresh synthesised windows."""
+    fitted: dict[str, Recogniser] = {}
+    for k, (sense, synth) in enumerate(SYNTH.items()):
+        windows, scenes = [], []
+        for s, scene in enumerate(DEMO_SCENES):
+            for i in range(windows_per_scene):
+                windows.append(synth(scene, np.random.default_rng([seed, TRAIN_STREAM, k, s, i])))
+                scenes.append(scene)
+        model = make_recogniser(sense, FRESH_METHODS[sense], random_state=seed)
+        fitted[sense] = model.fit(model.featurize(windows), scenes)
+    return fitted
+
+
+def walk_script(walk: tuple[Segment, ...] = WALK) -> list[tuple[str, float]]:
+    """The walk as the emulator's script: where the wearer is (the scene heard), for how long."""
+    return [(segment.sound, segment.seconds) for segment in walk]
+
+
+def _walk_clips(sense: str, seed: int) -> Iterator[Clip]:
+    for k in itertools.count():
+        scene = segment_at(k * DEFAULT_WINDOW_SECONDS).sound
+        rng = np.random.default_rng([seed, SENSOR_STREAM, len(sense), k])
+        yield Clip(scene, SYNTH[sense](scene, rng))
+
+
+def demo_sensor_sources(
+    seed: int = 0, *, clock: ManualClock | None = None
+) -> tuple[dict[str, SampleSource], Callable[[], None] | None]:
+    """({sense: source} of the walk, and what stops the emulator — None without one).
+
+    With `clock` (a fast run) the sources follow it; without, the emulator streams the walk at
+    real speed on a pty and a `SensorBoard` reads both streams from it."""
+    if clock is not None:
+        sources: dict[str, SampleSource] = {
+            sense: PacedSamples(
+                _walk_clips(sense, seed),
+                RATES[STREAM[sense]],
+                CHANNELS[STREAM[sense]],
+                follow=clock,
+                realtime=False,
+                name=f"demo {sense}",
+            )
+            for sense in SYNTH
+        }
+        return sources, None
+    emulator = SensorEmulator(script_scene(walk_script()), seed=seed)
+    board = SensorBoard(emulator.start())
+    return {sense: board.source(STREAM[sense]) for sense in SYNTH}, emulator.stop
