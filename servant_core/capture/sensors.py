@@ -8,10 +8,10 @@ The board is an Arduino running `docs/sensor_board.ino`; the line format is docu
     # anything                               a comment (the sketch's banner); ignored
 
 `<ms>` is the board's `millis()`: `SensorBoard.measured_rate` gives the rate the stamps show,
-to check against the rate the source assumes. A line that does not parse (line noise, a half line after a
-reset) is skipped and counted in `SensorBoard.bad_lines`, never a fault. A port that vanishes
-(the USB cable pulled) is a `ServantError` in one line; the sources are live, so the engine
-reopens them later.
+to check against the rate the source assumes. A line that does not parse (line noise, a half
+line after a reset) is skipped and counted in `SensorBoard.bad_lines`, never a fault. A port
+that vanishes (the USB cable pulled) is a `ServantError` in one line; the sources are live, so
+the engine reopens them later.
 
 `SensorBoard(port)` owns the port; `board.source("imu")` and `board.source("ambient")` are the
 two `SampleSource`s over it, which may be read from different threads.
