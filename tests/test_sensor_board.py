@@ -74,6 +74,7 @@ def test_the_board_streams_both_senses_through_the_pty_and_counts_a_bad_line():
         second = read_rows(imu, 0.6)
         light = ambient.read(1.0)
         assert board.bad_lines == before + 1
+        assert board.measured_rate("imu") == pytest.approx(50, rel=0.05)
         motion = np.concatenate([first, second])
         # 50 lines a second arrive (the first second's backlog aside), as float32 (n, 6)
         assert motion.dtype == np.float32 and motion.shape[1] == 6

@@ -7,10 +7,11 @@ The board is an Arduino running `docs/sensor_board.ino`; the line format is docu
     A,<ms>,<lux>,<celsius>,<hPa>             light, temperature, pressure (AMBIENT_RATE a second)
     # anything                               a comment (the sketch's banner); ignored
 
-`<ms>` is the board's `millis()`. A line that does not parse (line noise, a half line after a
-reset) is skipped and counted in `SensorBoard.bad_lines`, never a fault. A port that vanishes
-(the USB cable pulled) is a `ServantError` in one line; the sources are live, so the engine
-reopens them later.
+`<ms>` is the board's `millis()`: `SensorBoard.measured_rate` gives the rate the stamps show,
+to check against the rate the source assumes. A line that does not parse (line noise, a half
+line after a reset) is skipped and counted in `SensorBoard.bad_lines`, never a fault. A port
+that vanishes (the USB cable pulled) is a `ServantError` in one line; the sources are live, so
+the engine reopens them later.
 
 `SensorBoard(port)` owns the port; `board.source("imu")` and `board.source("ambient")` are the
 two `SampleSource`s over it, which may be read from different threads.
@@ -103,7 +104,16 @@ class SensorBoard:
             kind: deque(maxlen=max(1, int(BUFFER_SECONDS * rate)))
             for kind, rate in self.rates.items()
         }
+        # (first millis, latest millis, lines) of each stream since it was opened
+        self._stamps: dict[str, tuple[int, int, int]] = {}
         self._lock = threading.Lock()
+
+    def measured_rate(self, kind: str) -> float | None:
+        """Lines a second of a stream by the board's own clock (None before two lines): a
+        sketch set to another rate than `rates` says shows here."""
+        with self._lock:
+            first, latest, count = self._stamps.get(kind, (0, 0, 0))
+        return (count - 1) * 1000.0 / (latest - first) if count > 1 and latest > first else None
 
     def source(self, kind: str) -> SerialSamples:
         if kind not in CHANNELS:
@@ -120,6 +130,7 @@ class SensorBoard:
         with self._lock:
             self._users.discard(kind)
             self._rows[kind].clear()
+            self._stamps.pop(kind, None)
             if not self._users:
                 self._disconnect()
 
@@ -180,6 +191,8 @@ class SensorBoard:
                 continue
             if reading is not None and reading.kind in self._users:
                 self._rows[reading.kind].append(reading.values)
+                first, _, count = self._stamps.get(reading.kind, (reading.millis, 0, 0))
+                self._stamps[reading.kind] = (first, reading.millis, count + 1)
 
 
 class SerialSamples:
