@@ -122,6 +122,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _method_options(fusion)
     fusion.add_argument("--scenes", help="comma-separated scenes to keep (default: all paired)")
     _fusion_options(fusion)
+    fusion.add_argument(
+        "--drop-sense",
+        choices=("audio", "image"),
+        help="withhold this sense at test time (a broken microphone or camera)",
+    )
+    _seeds_option(fusion)
     _json_option(fusion)
     fusion.set_defaults(handler=cmd_eval_fusion)
 
@@ -199,7 +205,8 @@ def _fusion_options(parser: argparse.ArgumentParser) -> None:
         "--policy",
         choices=sorted(POLICIES),
         default="sequential",
-        help="sequential: the paper's (hear, then look); parallel: both senses at once",
+        help="sequential: the paper's (hear, then look); parallel: both senses at once; "
+        "learned: a small neural net over every sense's probabilities (parallel without one)",
     )
     parser.add_argument(
         "--acoustic-window",
@@ -479,14 +486,26 @@ def cmd_eval_fusion(args: argparse.Namespace) -> int:
         args.policy,
         _fusion_config(args),
         _warn,
+        drop_sense=args.drop_sense,
+        seeds=args.seeds,
     )
-    text = (
+    dropped = f" without {result['drop_sense']}" if result["drop_sense"] else ""
+    lines = [
         f"fusion policy={result['policy']} methods={result['method']} "
-        f"scenes={','.join(result['scenes'])}\n"
-        f"windows {result['n_test']}  decided {result['decision_rate']:.3f}  "
-        f"right when decided {result['precision']:.3f}  accuracy {result['accuracy']:.3f}"
-    )
-    emit(args, result, text)
+        f"scenes={','.join(result['scenes'])}{dropped}",
+        f"windows {result['n_test']}  decided {_figure(result, 'decision_rate')}  "
+        f"right when decided {_figure(result, 'precision')}  "
+        f"accuracy {_figure(result, 'accuracy')}",
+    ]
+    if result["policy"] == "learned":
+        lines += [
+            f"seed {r['random_state']}: threshold {r['threshold']}, fell back: {r['fallback']}"
+            if r["fallback"]
+            else f"seed {r['random_state']}: threshold {r['threshold']:.3f}, leaned on "
+            + ", ".join(f"{k} {n}" for k, n in r["leaned_on"].items())
+            for r in result.get("per_seed", [result])
+        ]
+    emit(args, result, "\n".join(lines))
     return 0
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Protocol
 
 from servant_core.events import Decision, FusionState
+from servant_core.fusion.learned import FusionNet, LearnedFusion
 from servant_core.fusion.parallel import ParallelFusion
 from servant_core.fusion.sequential import FusionConfig, SequentialFusion, scene_line
 
@@ -25,12 +26,18 @@ class FusionPolicy(Protocol):
     def state(self, t: float) -> FusionState: ...
 
 
-POLICIES: dict[str, type] = {"sequential": SequentialFusion, "parallel": ParallelFusion}
+POLICIES: dict[str, type] = {
+    "sequential": SequentialFusion,
+    "parallel": ParallelFusion,
+    "learned": LearnedFusion,
+}
 
 __all__ = [
     "POLICIES",
     "FusionConfig",
+    "FusionNet",
     "FusionPolicy",
+    "LearnedFusion",
     "ParallelFusion",
     "SequentialFusion",
     "scene_line",
