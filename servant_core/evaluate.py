@@ -28,11 +28,9 @@ from servant_core.fusion import POLICIES, FusionConfig, FusionNet, LearnedFusion
 from servant_core.fusion.learned import SenseOpinions
 from servant_core.fusion.learning import (
     DEFAULT_FOLDS,
-    contiguous_folds,
-    fresh_copy,
-    held_out_opinions,
-    order_folds,
+    picture_opinions,
     train_fusion_net,
+    window_opinions,
 )
 from servant_core.library import (
     Picture,
@@ -524,7 +522,7 @@ def run_fusion(
     )
 
 
-def _scores_rows(model: Recogniser, X: np.ndarray) -> list[Said]:
+def said_of(model: Recogniser, X: np.ndarray) -> list[Said]:
     """Each row's opinion: scene, confidence and probability per scene."""
     scenes, confidences = model.predict(X), model.confidence(X)
     proba = model.predict_proba(X)
@@ -542,21 +540,17 @@ def fusion_opinions(fitted: PairedFit, folds: int = DEFAULT_FOLDS) -> dict[str, 
     """Each sense's held-out opinions of its own training part (see
     `servant_core.fusion.learning`): what the learned fusion is trained on."""
     wf, train = fitted.windows, fitted.window_train
+    windows = WindowFeatures(
+        wf.features[train], wf.scenes[train], wf.recording[train], wf.position[train], wf.recordings
+    )
     p_train = np.flatnonzero(fitted.picture_train)
-    p_train = p_train[np.argsort([fitted.pictures[i].path.name for i in p_train], kind="stable")]
-    p_scenes = np.array([fitted.pictures[i].scene for i in p_train])
     return {
-        "audio": held_out_opinions(
-            lambda: fresh_copy(fitted.audio),
-            wf.features[train],
-            wf.scenes[train],
-            contiguous_folds(wf.recording[train], wf.position[train], folds),
-        ),
-        "image": held_out_opinions(
-            lambda: fresh_copy(fitted.visual),
+        "audio": window_opinions(fitted.audio, windows, folds),
+        "image": picture_opinions(
+            fitted.visual,
             fitted.picture_features[p_train],
-            p_scenes,
-            order_folds(p_scenes, folds),
+            [fitted.pictures[i] for i in p_train],
+            folds,
         ),
     }
 
@@ -590,14 +584,14 @@ def fusion_setup(
     fitted = fit_paired(library.restricted(paired), acoustic_method, visual_method, on_error)
     wf, train = fitted.windows, fitted.window_train
     test_pics = [i for i, t in enumerate(fitted.picture_train) if not t]
-    visual = _scores_rows(fitted.visual, fitted.picture_features[test_pics])
+    visual = said_of(fitted.visual, fitted.picture_features[test_pics])
     pictures: dict[str, list[Said]] = {}
     for k, i in enumerate(test_pics):
         pictures.setdefault(fitted.pictures[i].scene, []).append(visual[k])
     return FusionSetup(
         paired,
         wf.scenes[~train],
-        _scores_rows(fitted.audio, wf.features[~train]),
+        said_of(fitted.audio, wf.features[~train]),
         pictures,
         fusion_opinions(fitted, folds) if folds else None,
     )

@@ -18,6 +18,7 @@ import numpy as np
 
 from servant_core.errors import ServantError
 from servant_core.fusion.learned import FusionNet, SenseOpinions
+from servant_core.library import Picture, WindowFeatures
 from servant_core.recognisers.base import Recogniser, init_params
 
 DEFAULT_FOLDS = 4
@@ -75,6 +76,31 @@ def held_out_opinions(
         judged |= test
     return SenseOpinions(
         proba[judged], columns, predicted[judged].astype(str), scenes[judged], fold[judged]
+    )
+
+
+def window_opinions(
+    recogniser: Recogniser, windows: WindowFeatures, folds: int = DEFAULT_FOLDS
+) -> SenseOpinions:
+    """Held-out opinions of `windows` from fresh copies of `recogniser` (fitted or not: only
+    its parameters are used), folds in contiguous blocks of time within each recording."""
+    return held_out_opinions(
+        lambda: fresh_copy(recogniser),
+        windows.features,
+        windows.scenes,
+        contiguous_folds(windows.recording, windows.position, folds),
+    )
+
+
+def picture_opinions(
+    recogniser: Recogniser, X: np.ndarray, pictures: Sequence[Picture], folds: int = DEFAULT_FOLDS
+) -> SenseOpinions:
+    """Held-out opinions of the pictures featurized as rows of `X`, folds in blocks of file
+    name order within each scene."""
+    order = np.argsort([p.path.name for p in pictures], kind="stable")
+    scenes = np.array([pictures[i].scene for i in order])
+    return held_out_opinions(
+        lambda: fresh_copy(recogniser), X[order], scenes, order_folds(scenes, folds)
     )
 
 
