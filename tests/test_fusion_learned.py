@@ -9,9 +9,9 @@ from servant_core.fusion import POLICIES, FusionConfig, LearnedFusion, ParallelF
 from servant_core.fusion.learned import (
     FusionNet,
     SenseOpinions,
-    _spread_rows,
     precision_threshold,
     teaching_shortfall,
+    training_rows,
 )
 from servant_core.fusion.learning import (
     contiguous_folds,
@@ -70,7 +70,7 @@ def test_precision_threshold_is_the_lowest_that_keeps_the_target():
 def test_training_rows_drop_senses_but_never_all():
     rng = np.random.default_rng(1)
     opinions = {"audio": said(rng, 30, 1.0), "image": said(rng, 30, 1.0)}
-    X, y = _spread_rows(opinions, ["audio", "image"], SCENES, [0, 1, 2, 3], 3, 3, rng)
+    X, y = training_rows(opinions, ["audio", "image"], SCENES, [0, 1, 2, 3], 3, 3, rng)
     width = len(SCENES) + 2
     absent = X[:, [len(SCENES), width + len(SCENES)]]
     assert len(X) == 4 * 30 and len(y) == len(X)  # each row whole and in 3 dropped copies
@@ -180,3 +180,20 @@ def test_two_scenes_work_through_the_single_logistic_output():
     row = net.features({"audio": ({"cafe": 0.05, "gym": 0.95}, 0.0)})
     proba = net.predict_proba(row)
     assert proba.shape == (1, 2) and proba[0, 1] > 0.5 and proba.sum() == pytest.approx(1.0)
+
+
+def test_sense_dropout_makes_the_net_better_without_a_sense():
+    """Trained where the picture is always right, a net without dropout leans on it; with the
+    picture missing it is worse than a net that was shown rows without it."""
+    from sklearn.metrics import log_loss
+
+    rng = np.random.default_rng(9)
+    missing_picture = {"audio": said(rng, 120, 0.8)}
+    X, y = training_rows(missing_picture, ["audio", "image"], SCENES, [0, 1, 2, 3], 5, 0, rng)
+    rng = np.random.default_rng(0)
+    opinions = {"audio": said(rng, 120, 0.8), "image": said(rng, 120, 1.0)}
+    losses = [
+        log_loss(y, FusionNet(dropout_copies=c).fit(opinions).predict_proba(X), labels=SCENES)
+        for c in (0, 3)
+    ]
+    assert losses[1] < 0.8 * losses[0]

@@ -90,7 +90,7 @@ def teaching_shortfall(
     return None
 
 
-def _spread_rows(
+def training_rows(
     opinions: Mapping[str, SenseOpinions],
     senses: Sequence[str],
     scenes: Sequence[str],
@@ -224,10 +224,10 @@ class FusionNet:
         right: list[np.ndarray] = []
         for held in folds:
             others = [f for f in folds if f != held]
-            X, y = _spread_rows(
+            X, y = training_rows(
                 opinions, senses, scenes, others, self.pool, self.dropout_copies, rng
             )
-            X_held, y_held = _spread_rows(
+            X_held, y_held = training_rows(
                 opinions, senses, scenes, [held], self.pool, self.dropout_copies, rng
             )
             if len(X_held) == 0 or len(set(y.tolist())) < 2:
@@ -236,7 +236,7 @@ class FusionNet:
             proba = net.predict_proba(X_held)
             top.append(proba.max(axis=1))
             right.append(net.classes_[proba.argmax(axis=1)] == y_held)
-        X, y = _spread_rows(opinions, senses, scenes, folds, self.pool, self.dropout_copies, rng)
+        X, y = training_rows(opinions, senses, scenes, folds, self.pool, self.dropout_copies, rng)
         net = self._train(X, y)
         self.senses_ = senses
         self.scenes_ = [str(s) for s in net.classes_]
