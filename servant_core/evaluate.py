@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import inspect
 import math
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,7 +24,14 @@ from sklearn.metrics import confusion_matrix
 
 from servant_core.errors import ServantError
 from servant_core.events import Decision
-from servant_core.fusion import POLICIES, FusionConfig, scene_line
+from servant_core.fusion import POLICIES, FusionConfig, FusionNet, LearnedFusion, scene_line
+from servant_core.fusion.learned import SenseOpinions
+from servant_core.fusion.learning import (
+    DEFAULT_FOLDS,
+    picture_opinions,
+    train_fusion_net,
+    window_opinions,
+)
 from servant_core.library import (
     Picture,
     SceneLibrary,
@@ -456,34 +464,210 @@ def fit_paired(
     return PairedFit(audio, wf, train, visual, X, kept, p_train)
 
 
+Said = tuple[str, float, dict[str, float] | None]
+"""One sense's opinion in an encounter: its scene, its confidence, its scores (None: not given)."""
+SENSES = ("audio", "image")
+
+
+def _tell(policy: Any, sense: str, said: Said, t: float) -> list[Any]:
+    """Give a policy one opinion: with its scores to a policy that takes any sense (`on_sense`),
+    as the scene and confidence to a rule policy."""
+    scene, confidence, scores = said
+    if hasattr(policy, "on_sense"):
+        return list(policy.on_sense(sense, scene, confidence, t, scores))
+    tell = policy.on_acoustic if sense == "audio" else policy.on_visual
+    return list(tell(scene, confidence, t))
+
+
+def run_encounter(
+    policy: Any, config: FusionConfig, acoustic: Said | None, visual: Sequence[Said]
+) -> Decision:
+    """One scene encounter in simulated time: the acoustic opinion at t=0 (None: no sound),
+    then pictures as the policy asks for them (cycling through `visual`; none if empty), until
+    a decision. A policy that never opened a window decides nothing."""
+    t = 0.0
+    step = config.picture_interval_s / 4
+    events = _tell(policy, "audio", acoustic, t) if acoustic is not None else []
+    shown = 0
+    horizon = config.acoustic_window_s + config.picture_interval_s + 5 * step
+    while t <= horizon:
+        for event in events:
+            if isinstance(event, Decision):
+                return event
+        t = round(t + step, 9)
+        events = policy.tick(t)
+        if not events and visual and policy.wants_picture(t):
+            events = _tell(policy, "image", visual[shown % len(visual)], t)
+            shown += 1
+    if policy.state(t).phase == "listening":
+        return Decision(t, None, 0.0, scene_line(None))
+    raise RuntimeError(f"fusion policy {type(policy).__name__} made no decision within its window")
+
+
 def run_fusion(
     policy_name: str,
     config: FusionConfig,
     acoustic: tuple[str, float],
     visual: Sequence[tuple[str, float]],
 ) -> Any:
-    """One scene encounter in simulated time: the acoustic prediction at t=0, then pictures as
-    the policy asks for them (cycling through `visual`), until a decision. Returns the Decision."""
-    policy = POLICIES[policy_name](config)
+    """One scene encounter through a rule policy (see `run_encounter`). Returns the Decision."""
     if acoustic[0] == UNKNOWN:
         # An unknown place opens no window in any policy: nothing to confirm, no decision.
         return Decision(0.0, None, 0.0, scene_line(None))
-    t = 0.0
-    step = config.picture_interval_s / 4
-    events = policy.on_acoustic(acoustic[0], acoustic[1], t)
-    shown = 0
-    horizon = config.acoustic_window_s + config.picture_interval_s + 5 * step
-    while t <= horizon:
-        for event in events:
-            if hasattr(event, "line"):
-                return event
-        t = round(t + step, 9)
-        events = policy.tick(t)
-        if not events and policy.wants_picture(t):
-            scene, confidence = visual[shown % len(visual)]
-            shown += 1
-            events = policy.on_visual(scene, confidence, t)
-    raise RuntimeError(f"fusion policy {policy_name!r} made no decision within its window")
+    return run_encounter(
+        POLICIES[policy_name](config),
+        config,
+        (*acoustic, None),
+        [(*v, None) for v in visual],
+    )
+
+
+def said_of(model: Recogniser, X: np.ndarray) -> list[Said]:
+    """Each row's opinion: scene, confidence and probability per scene."""
+    scenes, confidences = model.predict(X), model.confidence(X)
+    proba = model.predict_proba(X)
+    return [
+        (
+            str(scenes[i]),
+            float(confidences[i]),
+            dict(zip(model.scenes_, map(float, proba[i]), strict=True)),
+        )
+        for i in range(len(scenes))
+    ]
+
+
+def fusion_opinions(fitted: PairedFit, folds: int = DEFAULT_FOLDS) -> dict[str, SenseOpinions]:
+    """Each sense's held-out opinions of its own training part (see
+    `servant_core.fusion.learning`): what the learned fusion is trained on."""
+    wf, train = fitted.windows, fitted.window_train
+    windows = WindowFeatures(
+        wf.features[train], wf.scenes[train], wf.recording[train], wf.position[train], wf.recordings
+    )
+    p_train = np.flatnonzero(fitted.picture_train)
+    return {
+        "audio": window_opinions(fitted.audio, windows, folds),
+        "image": picture_opinions(
+            fitted.visual,
+            fitted.picture_features[p_train],
+            [fitted.pictures[i] for i in p_train],
+            folds,
+        ),
+    }
+
+
+FUSION_METRICS = ("decision_rate", "precision", "accuracy")
+
+
+@dataclass
+class FusionSetup:
+    """What a fusion evaluation runs encounters from: each test window's acoustic opinion and
+    its true scene, each scene's test pictures' opinions, and (for the learned fusion) each
+    sense's held-out opinions of the training parts."""
+
+    scenes: list[str]
+    truth: np.ndarray
+    acoustic: list[Said]
+    pictures: dict[str, list[Said]]
+    opinions: dict[str, SenseOpinions] | None = None
+
+
+def fusion_setup(
+    library: SceneLibrary,
+    acoustic_method: str,
+    visual_method: str,
+    on_error: Callable[[ServantError], None] | None = None,
+    folds: int | None = DEFAULT_FOLDS,
+) -> FusionSetup:
+    """Fit both recognisers on the training parts of `library`'s paired scenes and judge the
+    test parts; with `folds`, also the held-out opinions the learned fusion trains on."""
+    paired = _paired_scenes(library, None, "fusion needs")
+    fitted = fit_paired(library.restricted(paired), acoustic_method, visual_method, on_error)
+    wf, train = fitted.windows, fitted.window_train
+    test_pics = [i for i, t in enumerate(fitted.picture_train) if not t]
+    visual = said_of(fitted.visual, fitted.picture_features[test_pics])
+    pictures: dict[str, list[Said]] = {}
+    for k, i in enumerate(test_pics):
+        pictures.setdefault(fitted.pictures[i].scene, []).append(visual[k])
+    return FusionSetup(
+        paired,
+        wf.scenes[~train],
+        said_of(fitted.audio, wf.features[~train]),
+        pictures,
+        fusion_opinions(fitted, folds) if folds else None,
+    )
+
+
+def score_fusion(
+    setup: FusionSetup,
+    make_policy: Callable[[], Any],
+    config: FusionConfig,
+    drop_sense: str | None = None,
+) -> dict[str, Any]:
+    """Each test window meets its scene's test pictures, in turn, through a fresh policy;
+    `drop_sense` withholds that sense. Decision rate, precision, accuracy, and which senses the
+    decisions leaned on."""
+    decided = right = 0
+    leaned: Counter[str] = Counter()
+    cursor = dict.fromkeys(setup.pictures, 0)
+    for i, scene in enumerate(setup.truth):
+        pics = setup.pictures[scene]
+        start = cursor[scene]
+        shown = [pics[(start + j) % len(pics)] for j in range(len(pics))]
+        cursor[scene] = (start + config.pictures_needed) % len(pics)
+        heard = None if drop_sense == "audio" else setup.acoustic[i]
+        decision = run_encounter(
+            make_policy(), config, heard, [] if drop_sense == "image" else shown
+        )
+        if decision.scene is not None:
+            decided += 1
+            right += decision.scene == scene
+            leaned.update(["+".join(decision.leaned_on) or "-"])
+    n = len(setup.truth)
+    return {
+        "decision_rate": decided / n if n else 0.0,
+        "precision": right / decided if decided else 0.0,
+        "accuracy": right / n if n else 0.0,
+        "leaned_on": dict(leaned.most_common()),
+    }
+
+
+def score_learned(
+    setup: FusionSetup, config: FusionConfig, drop_sense: str | None = None, seeds: int = 1
+) -> dict[str, Any]:
+    """The learned fusion over net random states 0..seeds-1: each seed's net is trained on the
+    setup's held-out opinions; one seed's figures, or their mean, spread and `per_seed`."""
+    if setup.opinions is None:
+        raise ValueError("the learned fusion needs a setup made with folds")
+    runs = []
+    for seed in range(seeds):
+        net, reason = train_fusion_net(setup.opinions, random_state=seed)
+
+        def make_policy(net: FusionNet | None = net) -> LearnedFusion:
+            return LearnedFusion(config, net)
+
+        row = score_fusion(setup, make_policy, config, drop_sense)
+        row.update(
+            random_state=seed,
+            threshold=net.threshold_ if net is not None else None,
+            fallback=reason,
+        )
+        runs.append(row)
+    result = dict(runs[0])
+    result["n_train"] = {sense: len(o.truth) for sense, o in setup.opinions.items()}
+    if seeds > 1:
+        result.pop("random_state")
+        result["seeds"] = seeds
+        result["per_seed"] = runs
+        result["spread"] = {}
+        for key in FUSION_METRICS:
+            values = np.array([r[key] for r in runs])
+            result[key] = float(values.mean())
+            result["spread"][key] = {
+                "std": float(values.std()),
+                "min": float(values.min()),
+                "max": float(values.max()),
+            }
+    return result
 
 
 def evaluate_fusion(
@@ -493,54 +677,46 @@ def evaluate_fusion(
     policy: str = "sequential",
     config: FusionConfig | None = None,
     on_error: Callable[[ServantError], None] | None = None,
+    *,
+    drop_sense: str | None = None,
+    seeds: int = 1,
+    folds: int = DEFAULT_FOLDS,
 ) -> dict[str, Any]:
     """Each test window (temporal split) of a scene that also has pictures is paired with that
     scene's test pictures (file-order split), in turn; the policy decides or not. Reports how
-    often it decides and, when it names a scene, how often it is right."""
+    often it decides and, when it names a scene, how often it is right.
+
+    `learned`: the net is trained on each sense's held-out opinions of the training parts
+    (`fusion_opinions`), over net random states 0..seeds-1 (mean, spread, per seed).
+    `drop_sense` ("audio" or "image") withholds that sense at test time."""
     if policy not in POLICIES:
         raise ServantError(
             f"unknown fusion policy {policy!r}; choose {', '.join(sorted(POLICIES))}"
         )
+    if drop_sense is not None and drop_sense not in SENSES:
+        raise ServantError(f"no sense named {drop_sense!r} to drop; choose {', '.join(SENSES)}")
+    if seeds < 1:
+        raise ServantError(f"--seeds must be at least 1, not {seeds}")
     config = config or FusionConfig()
-    paired = _paired_scenes(library, None, "fusion needs")
-    fitted = fit_paired(library.restricted(paired), acoustic_method, visual_method, on_error)
-    wf, train = fitted.windows, fitted.window_train
-    a_scene = fitted.audio.predict(wf.features[~train])
-    a_conf = fitted.audio.confidence(wf.features[~train])
-
-    X, kept = fitted.picture_features, fitted.pictures
-    test_pics = [i for i, t in enumerate(fitted.picture_train) if not t]
-    v_scene = fitted.visual.predict(X[test_pics])
-    v_conf = fitted.visual.confidence(X[test_pics])
-    by_scene: dict[str, list[tuple[str, float]]] = {}
-    for k, i in enumerate(test_pics):
-        by_scene.setdefault(kept[i].scene, []).append((str(v_scene[k]), float(v_conf[k])))
-
-    truth = wf.scenes[~train]
-    decided = right = 0
-    cursor = dict.fromkeys(by_scene, 0)
-    for i, scene in enumerate(truth):
-        pics = by_scene[scene]
-        start = cursor[scene]
-        shown = [pics[(start + j) % len(pics)] for j in range(len(pics))]
-        cursor[scene] = (start + config.pictures_needed) % len(pics)
-        decision = run_fusion(policy, config, (str(a_scene[i]), float(a_conf[i])), shown)
-        if decision.scene is not None:
-            decided += 1
-            right += decision.scene == scene
-    n = len(truth)
-    return {
+    learned = policy == "learned"
+    setup = fusion_setup(
+        library, acoustic_method, visual_method, on_error, folds if learned else None
+    )
+    result: dict[str, Any] = {
         "method": f"{acoustic_method}+{visual_method}",
         "acoustic_method": acoustic_method,
         "visual_method": visual_method,
         "policy": policy,
         "protocol": "temporal+file-order",
-        "scenes": paired,
-        "n_test": n,
-        "decision_rate": decided / n if n else 0.0,
-        "precision": right / decided if decided else 0.0,
-        "accuracy": right / n if n else 0.0,
+        "scenes": setup.scenes,
+        "n_test": len(setup.truth),
+        "drop_sense": drop_sense,
     }
+    if learned:
+        result.update(score_learned(setup, config, drop_sense, seeds))
+    else:
+        result.update(score_fusion(setup, lambda: POLICIES[policy](config), config, drop_sense))
+    return result
 
 
 def _first_test_items(

@@ -98,6 +98,9 @@ class Decision:
     # "%" when both senses' confidences are percentages; None when they are not (the paper's
     # eq. 1 and eq. 2 averaged) or not said.
     confidence_unit: str | None = None
+    # The senses the decision leaned on, most first (the learned fusion says; the rule
+    # policies leave it empty).
+    leaned_on: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,9 @@
 
 The header (format name, version, and per recogniser its sense, method, scenes and parameters)
 is stored as a 0-d unicode array named `header`; a recogniser's arrays are stored as
-`<role>/<name>`. Loading uses `allow_pickle=False`, so a file can never run code.
+`<role>/<name>`. The learned fusion's net, when there is one, is the header's `fusion` entry and
+the arrays `fusion/<name>` (a reader that does not know it ignores it). Loading uses
+`allow_pickle=False`, so a file can never run code.
 """
 
 from __future__ import annotations
@@ -27,12 +29,14 @@ from servant_core.audio import (
     os_reason,
 )
 from servant_core.errors import ServantError
+from servant_core.fusion.learned import FusionNet
 from servant_core.recognisers import UNKNOWN, Recogniser, methods_for
 from servant_core.senses import ROLE_SENSE
 from servant_core.storage import atomic_save_npz
 
 FORMAT = "servant-model"
 VERSION = 1
+FUSION = "fusion"
 
 # What a model file may hold, checked before anything is read in full. The largest real model
 # (the paper's FFT centroids, ten scenes) is about 10 MB; these limits leave ample room and keep
@@ -60,10 +64,16 @@ GENERIC_LIMIT = (-1e9, 1e9)
 SENSOR_RATE_LIMITS = {"motion": (1, 2000), "ambient": (1, 100)}
 
 
-def save_model(path: str | Path, recognisers: dict[str, Recogniser]) -> Path:
-    """Save recognisers by role (e.g. "acoustic", "visual") into one model file, atomically."""
+def save_model(
+    path: str | Path, recognisers: dict[str, Recogniser], fusion: FusionNet | None = None
+) -> Path:
+    """Save recognisers by role (e.g. "acoustic", "visual"), and the learned fusion's net if
+    given, into one model file, atomically."""
     header: dict[str, Any] = {"format": FORMAT, "version": VERSION, "recognisers": {}}
     arrays: dict[str, np.ndarray] = {}
+    if fusion is not None:
+        header[FUSION], parts = fusion.get_state()
+        arrays |= {f"{FUSION}/{name}": np.asarray(a) for name, a in parts.items()}
     for role, recogniser in recognisers.items():
         state, parts = recogniser.get_state()
         header["recognisers"][role] = {
@@ -92,6 +102,12 @@ def load_model(path: str | Path) -> dict[str, Recogniser]:
     Every size, header field and array is checked against its method before use, and each
     recogniser must then recognise a made-up window or picture with finite numbers.
     """
+    return load_model_and_fusion(path)[0]
+
+
+def load_model_and_fusion(path: str | Path) -> tuple[dict[str, Recogniser], FusionNet | None]:
+    """`load_model`, and the learned fusion's net saved with the recognisers (None: none was),
+    checked as strictly: its parameters, names and layer shapes, then one finite decision."""
     path = Path(path)
     if not path.exists():
         raise ServantError(
@@ -101,10 +117,31 @@ def load_model(path: str | Path) -> dict[str, Recogniser]:
     header = _read_header(path, files.pop("header", None))
     recognisers: dict[str, Recogniser] = {}
     for role, state in header["recognisers"].items():
-        prefix = f"{role}/"
-        parts = {k[len(prefix) :]: v for k, v in files.items() if k.startswith(prefix)}
-        recognisers[role] = _recogniser(path, role, state, parts)
-    return recognisers
+        recognisers[role] = _recogniser(path, role, state, _parts(files, role))
+    fusion = header.get(FUSION)
+    if fusion is None:
+        return recognisers, None
+    return recognisers, _fusion_net(path, fusion, _parts(files, FUSION))
+
+
+def _parts(files: dict[str, np.ndarray], role: str) -> dict[str, np.ndarray]:
+    prefix = f"{role}/"
+    return {k[len(prefix) :]: v for k, v in files.items() if k.startswith(prefix)}
+
+
+def _fusion_net(path: Path, state: Any, parts: dict[str, np.ndarray]) -> FusionNet:
+    try:
+        if not isinstance(state, dict) or not isinstance(state.get("params"), dict):
+            raise ValueError("no parameters")
+        _check_params(FusionNet, state["params"], FUSION)
+        _check_arrays(parts)
+        net = FusionNet.from_state(state, parts)
+        proba = net.predict_proba(net.features({}))
+        if proba.shape != (1, len(net.scenes_)) or not np.all(np.isfinite(proba)):
+            raise ValueError("its arrays do not fit its scenes")
+    except (ValueError, KeyError, TypeError) as exc:
+        raise _damaged(path, f"{FUSION}: {first_line(exc)[:120]}") from None
+    return net
 
 
 def _damaged(path: Path, what: str) -> ServantError:

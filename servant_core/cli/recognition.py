@@ -17,17 +17,21 @@ from servant_core.evaluate import (
     DEFAULT_SHOTS,
     IMAGE_TRAIN_FRACTION,
     PROTOCOLS,
+    Said,
     evaluate_audio,
     evaluate_fusion,
     evaluate_image,
     format_tables,
     paper_tables,
+    run_encounter,
     run_fusion,
+    said_of,
 )
 from servant_core.event_text import confidence_text, place
-from servant_core.fusion import POLICIES, FusionConfig
+from servant_core.fusion import POLICIES, FusionConfig, LearnedFusion
+from servant_core.fusion.learning import picture_opinions, train_fusion_net, window_opinions
 from servant_core.library import SceneLibrary, featurize_recordings, read_picture, read_pictures
-from servant_core.modelfile import load_model, save_model
+from servant_core.modelfile import load_model_and_fusion, save_model
 from servant_core.progress import Progress
 from servant_core.recognisers import (
     ACOUSTIC_METHODS,
@@ -54,6 +58,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--skip-bad",
         action="store_true",
         help="skip unreadable or damaged files (with a warning) instead of stopping",
+    )
+    train.add_argument(
+        "--learned-fusion",
+        action="store_true",
+        help="also train the learned fusion's net (for --policy learned) on the recognisers' "
+        "held-out opinions; slower: each recogniser is refitted once per fold",
     )
     _json_option(train)
     train.set_defaults(handler=cmd_train)
@@ -124,6 +134,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _method_options(fusion)
     fusion.add_argument("--scenes", help="comma-separated scenes to keep (default: all paired)")
     _fusion_options(fusion)
+    fusion.add_argument(
+        "--drop-sense",
+        choices=("audio", "image"),
+        help="withhold this sense at test time (a broken microphone or camera)",
+    )
+    _seeds_option(fusion)
     _json_option(fusion)
     fusion.set_defaults(handler=cmd_eval_fusion)
 
@@ -201,7 +217,8 @@ def _fusion_options(parser: argparse.ArgumentParser) -> None:
         "--policy",
         choices=sorted(POLICIES),
         default="sequential",
-        help="sequential: the paper's (hear, then look); parallel: both senses at once",
+        help="sequential: the paper's (hear, then look); parallel: both senses at once; "
+        "learned: a small neural net over every sense's probabilities (parallel without one)",
     )
     parser.add_argument(
         "--acoustic-window",
@@ -276,7 +293,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     if len({p.scene for p in library.pictures}) >= 2:
         visual = make_recogniser("image", args.image_method)
         images, kept = read_pictures(library.pictures, on_error, Progress("reading pictures"))
-        visual.fit(visual.featurize(images), [p.scene for p in kept])
+        X_pictures = visual.featurize(images)
+        visual.fit(X_pictures, [p.scene for p in kept])
         recognisers["visual"] = visual
         summary["visual"] = {
             "method": args.image_method,
@@ -304,8 +322,21 @@ def cmd_train(args: argparse.Namespace) -> int:
             f"{args.root}: training needs at least two scene folders with recordings, pictures "
             "or sensor logs"
         )
+    fusion = None
+    if args.learned_fusion:
+        opinions = {}
+        if "acoustic" in recognisers:
+            opinions["audio"] = window_opinions(recognisers["acoustic"], wf)
+        if "visual" in recognisers:
+            opinions["image"] = picture_opinions(recognisers["visual"], X_pictures, kept)
+        fusion, reason = train_fusion_net(opinions)
+        summary["fusion"] = (
+            {"senses": fusion.senses_, "scenes": fusion.scenes_, "threshold": fusion.threshold_}
+            if fusion is not None
+            else {"fallback": reason}
+        )
     output = args.output or data_dir() / "models" / "model.npz"
-    save_model(output, recognisers)
+    save_model(output, recognisers, fusion)
     summary["model"] = str(output)
     lines = [f"model written to {output}"]
     for role in ("acoustic", "visual", *SAMPLE_SENSES):
@@ -319,6 +350,13 @@ def cmd_train(args: argparse.Namespace) -> int:
             lines.append(
                 f"{role}: {s['method']} on {count} {unit}, scenes {', '.join(s['scenes'])}"
             )
+    if "fusion" in summary:
+        f = summary["fusion"]
+        lines.append(
+            f"learned fusion: over {', '.join(f['senses'])}, threshold {f['threshold']:.3f}"
+            if "threshold" in f
+            else f"learned fusion: none, the parallel policy decides ({f['fallback']})"
+        )
     lines += [f"warning: {w}" for w in summary["warnings"]]
     emit(args, summary, "\n".join(lines))
     return 0
@@ -331,10 +369,10 @@ def _raise(error: ServantError) -> None:
 def cmd_predict(args: argparse.Namespace) -> int:
     if args.audio is None and not args.image:
         raise ServantError("give --audio FILE and/or --image FILE...")
-    model = load_model(args.model)
+    model, fusion = load_model_and_fusion(args.model)
     result: dict[str, Any] = {}
     lines: list[str] = []
-    first_acoustic: tuple[str, float] | None = None
+    first_acoustic: Said | None = None
     if args.audio is not None:
         audio = cast(AcousticRecogniser, _role(model, "acoustic", args.model))
         rate, seconds = audio.rate, audio.window_seconds
@@ -354,30 +392,42 @@ def cmd_predict(args: argparse.Namespace) -> int:
             f"Acoustic window {i}: {_judged(str(s), float(c), unit)}"
             for i, (s, c) in enumerate(zip(scenes, confidences, strict=True))
         ]
-        first_acoustic = (str(scenes[0]), float(confidences[0]))
-    visual_predictions: list[tuple[str, float]] = []
+        first_acoustic = (
+            str(scenes[0]),
+            float(confidences[0]),
+            dict(zip(audio.scenes_, map(float, audio.predict_proba(X)[0]), strict=True)),
+        )
+    visual_predictions: list[Said] = []
     if args.image:
         visual = _role(model, "visual", args.model)
         X = visual.featurize([read_picture(p) for p in args.image])
-        scenes, confidences = visual.predict(X), visual.confidence(X)
-        visual_predictions = [(str(s), float(c)) for s, c in zip(scenes, confidences, strict=True)]
+        visual_predictions = said_of(visual, X)
         unit = visual.confidence_unit
         result["visual"] = [
             {"picture": str(p), "scene": s, "confidence": c, "confidence_unit": unit}
-            for p, (s, c) in zip(args.image, visual_predictions, strict=True)
+            for p, (s, c, _) in zip(args.image, visual_predictions, strict=True)
         ]
         lines += [
             f"Visual {p.name}: {_judged(s, c, unit)}"
-            for p, (s, c) in zip(args.image, visual_predictions, strict=True)
+            for p, (s, c, _) in zip(args.image, visual_predictions, strict=True)
         ]
     if first_acoustic is not None and visual_predictions:
-        decision = run_fusion(args.policy, _fusion_config(args), first_acoustic, visual_predictions)
+        config = _fusion_config(args)
+        if args.policy == "learned":
+            # the net saved with the model by `train --learned-fusion`; without one, the fallback
+            policy = LearnedFusion(config, fusion)
+            decision = run_encounter(policy, config, first_acoustic, visual_predictions)
+        else:
+            decision = run_fusion(
+                args.policy, config, first_acoustic[:2], [v[:2] for v in visual_predictions]
+            )
         shared = decision_unit(model.get("acoustic"), model.get("visual"))
         result["decision"] = {
             "scene": decision.scene,
             "line": decision.line,
             "confidence": decision.confidence,
             "confidence_unit": shared,
+            "leaned_on": list(decision.leaned_on),
         }
         average = confidence_text(decision.confidence, shared)
         lines.append(f"{decision.line} (average confidence {average})")
@@ -504,14 +554,26 @@ def cmd_eval_fusion(args: argparse.Namespace) -> int:
         args.policy,
         _fusion_config(args),
         _warn,
+        drop_sense=args.drop_sense,
+        seeds=args.seeds,
     )
-    text = (
+    dropped = f" without {result['drop_sense']}" if result["drop_sense"] else ""
+    lines = [
         f"fusion policy={result['policy']} methods={result['method']} "
-        f"scenes={','.join(result['scenes'])}\n"
-        f"windows {result['n_test']}  decided {result['decision_rate']:.3f}  "
-        f"right when decided {result['precision']:.3f}  accuracy {result['accuracy']:.3f}"
-    )
-    emit(args, result, text)
+        f"scenes={','.join(result['scenes'])}{dropped}",
+        f"windows {result['n_test']}  decided {_figure(result, 'decision_rate')}  "
+        f"right when decided {_figure(result, 'precision')}  "
+        f"accuracy {_figure(result, 'accuracy')}",
+    ]
+    if result["policy"] == "learned":
+        lines += [
+            f"seed {r['random_state']}: threshold {r['threshold']}, fell back: {r['fallback']}"
+            if r["fallback"]
+            else f"seed {r['random_state']}: threshold {r['threshold']:.3f}, leaned on "
+            + ", ".join(f"{k} {n}" for k, n in r["leaned_on"].items())
+            for r in result.get("per_seed", [result])
+        ]
+    emit(args, result, "\n".join(lines))
     return 0
 
 

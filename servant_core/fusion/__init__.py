@@ -1,7 +1,10 @@
 """Fusion policies: when do a sound and a picture make a scene decision.
 
 A policy is fed predictions with their times and returns the events it produces (`Decision`,
-`FusionState`); time is always passed in, so tests run in no wall time.
+`FusionState`); time is always passed in, so tests run in no wall time. The learned policy also
+takes any sense's opinion with its scores (`LearnedFusion.on_sense`), and `scores=` on
+`on_acoustic`/`on_visual`; built from the registry with a config alone it has no net and
+decides as the parallel policy.
 """
 
 from __future__ import annotations
@@ -9,6 +12,7 @@ from __future__ import annotations
 from typing import Protocol
 
 from servant_core.events import Decision, FusionState
+from servant_core.fusion.learned import FusionNet, LearnedFusion
 from servant_core.fusion.parallel import ParallelFusion
 from servant_core.fusion.sequential import FusionConfig, SequentialFusion, scene_line
 
@@ -25,12 +29,18 @@ class FusionPolicy(Protocol):
     def state(self, t: float) -> FusionState: ...
 
 
-POLICIES: dict[str, type] = {"sequential": SequentialFusion, "parallel": ParallelFusion}
+POLICIES: dict[str, type] = {
+    "sequential": SequentialFusion,
+    "parallel": ParallelFusion,
+    "learned": LearnedFusion,
+}
 
 __all__ = [
     "POLICIES",
     "FusionConfig",
+    "FusionNet",
     "FusionPolicy",
+    "LearnedFusion",
     "ParallelFusion",
     "SequentialFusion",
     "scene_line",

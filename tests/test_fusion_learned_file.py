@@ -1,0 +1,96 @@
+"""The learned fusion's net in the model file: saved without pickle, checked strictly on load."""
+
+import json
+
+import numpy as np
+import pytest
+
+from servant_core.errors import ServantError
+from servant_core.fusion.learned import FusionNet
+from servant_core.modelfile import load_model, load_model_and_fusion, save_model
+from servant_core.storage import atomic_save_npz
+from tests.test_fusion_learned import said
+from tests.test_modelfile import fitted_visual
+
+
+@pytest.fixture(scope="module")
+def net():
+    rng = np.random.default_rng(0)
+    return FusionNet(hidden_layer_sizes=(8,), max_iter=200).fit(
+        {"audio": said(rng, 60, 0.95), "image": said(rng, 60, 0.7)}
+    )
+
+
+def saved(tmp_path, net):
+    return save_model(tmp_path / "m.npz", {"visual": fitted_visual()}, fusion=net)
+
+
+def test_round_trip_keeps_the_net_and_the_recognisers(tmp_path, net):
+    path = saved(tmp_path, net)
+    recognisers, loaded = load_model_and_fusion(path)
+    assert set(recognisers) == {"visual"} and set(load_model(path)) == {"visual"}
+    X = np.random.default_rng(1).random((5, 2 * (3 + 2)))
+    assert np.array_equal(loaded.predict_proba(X), net.predict_proba(X))
+    assert loaded.threshold_ == net.threshold_ and loaded.senses_ == ["audio", "image"]
+    with np.load(path, allow_pickle=False) as npz:
+        assert "fusion/coef_0" in npz.files
+        assert json.loads(str(npz["header"]))["fusion"]["scenes"] == ["cafe", "gym", "street"]
+
+
+def test_a_model_without_a_net_has_none(tmp_path):
+    path = save_model(tmp_path / "m.npz", {"visual": fitted_visual()})
+    assert load_model_and_fusion(path)[1] is None
+
+
+def rewrite(path, header_change=None, array_change=None):
+    with np.load(path, allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    header = json.loads(str(arrays["header"]))
+    if header_change:
+        header_change(header["fusion"])
+    if array_change:
+        array_change(arrays)
+    arrays["header"] = np.array(json.dumps(header))
+    atomic_save_npz(path, arrays)
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        lambda f: f["params"].update(hidden_layer_sizes=[9]),  # weights are 8 wide
+        lambda f: f["params"].update(activation="softsign"),
+        lambda f: f["params"].update(unheard_of=1),
+        lambda f: f["params"].update(max_iter="400"),
+        lambda f: f.update(threshold=1.5),
+        lambda f: f.update(threshold=None),
+        lambda f: f.update(scenes=["cafe", "gym"]),  # the output layer has three
+        lambda f: f.update(scenes=["cafe", "cafe", "gym"]),
+        lambda f: f.update(senses=["audio"]),
+        lambda f: f.update(senses="audio"),
+        lambda f: f.pop("params"),
+        lambda f: f.clear(),
+    ],
+)
+def test_a_doctored_header_is_refused_in_one_line(tmp_path, net, change):
+    path = saved(tmp_path, net)
+    rewrite(path, header_change=change)
+    with pytest.raises(ServantError, match="damaged Servant model file.*fusion") as info:
+        load_model_and_fusion(path)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        lambda a: a.update({"fusion/coef_0": a["fusion/coef_0"][:-1]}),
+        lambda a: a.update({"fusion/intercept_1": np.full_like(a["fusion/intercept_1"], np.nan)}),
+        lambda a: a.pop("fusion/coef_1"),
+        lambda a: a.update({"fusion/coef_2": np.zeros((3, 3))}),
+        lambda a: a.update({"fusion/coef_0": a["fusion/coef_0"].astype(np.complex64)}),
+    ],
+)
+def test_wrong_weights_are_refused(tmp_path, net, change):
+    path = saved(tmp_path, net)
+    rewrite(path, array_change=change)
+    with pytest.raises(ServantError, match="damaged Servant model file.*fusion"):
+        load_model_and_fusion(path)
