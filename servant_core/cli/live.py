@@ -236,7 +236,8 @@ def _event_line(event: Event) -> str | None:
     if isinstance(event, (Decision, AcousticPrediction, VisualPrediction)):
         confidence = confidence_text(event.confidence, event.confidence_unit)
         if isinstance(event, Decision):
-            return f"{at} {event.line}  confidence {confidence}"
+            leaned = f"  leaned on {', '.join(event.leaned_on)}" if event.leaned_on else ""
+            return f"{at} {event.line}  confidence {confidence}{leaned}"
         verb, sense = (
             ("heard", "acoustic") if isinstance(event, AcousticPrediction) else ("saw", "visual")
         )

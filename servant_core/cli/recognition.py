@@ -11,7 +11,7 @@ from typing import Any, cast
 from servant_core.audio import DEFAULT_RATE, DEFAULT_WINDOW_SECONDS, cut_windows, read_audio
 from servant_core.cli import emit, one_line, options
 from servant_core.engine import FRESH_METHODS, decision_unit
-from servant_core.engine.learning import refit_samples
+from servant_core.engine.learning import library_fusion_net, refit_samples
 from servant_core.errors import ServantError
 from servant_core.evaluate import (
     DEFAULT_SHOTS,
@@ -29,7 +29,6 @@ from servant_core.evaluate import (
 )
 from servant_core.event_text import confidence_text, place
 from servant_core.fusion import POLICIES, FusionConfig, LearnedFusion
-from servant_core.fusion.learning import picture_opinions, train_fusion_net, window_opinions
 from servant_core.library import SceneLibrary, featurize_recordings, read_picture, read_pictures
 from servant_core.modelfile import load_model_and_fusion, save_model
 from servant_core.progress import Progress
@@ -42,7 +41,7 @@ from servant_core.recognisers import (
     make_audio_recogniser,
     make_recogniser,
 )
-from servant_core.senses import SAMPLE_SENSES
+from servant_core.senses import ROLE_SENSE, SAMPLE_SENSES
 from servant_core.storage import data_dir
 
 
@@ -324,12 +323,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         )
     fusion = None
     if args.learned_fusion:
-        opinions = {}
-        if "acoustic" in recognisers:
-            opinions["audio"] = window_opinions(recognisers["acoustic"], wf)
-        if "visual" in recognisers:
-            opinions["image"] = picture_opinions(recognisers["visual"], X_pictures, kept)
-        fusion, reason = train_fusion_net(opinions)
+        by_sense = {ROLE_SENSE[role]: model for role, model in recognisers.items()}
+        fusion, reason = library_fusion_net(library, by_sense, args.window, on_error or _raise)
         summary["fusion"] = (
             {"senses": fusion.senses_, "scenes": fusion.scenes_, "threshold": fusion.threshold_}
             if fusion is not None

@@ -120,17 +120,23 @@ class ArmControl:
 
     # --- acting -------------------------------------------------------------------------------
 
-    def act(self, scene: str, scores: dict[str, dict[str, float]], threshold: float | None) -> None:
+    def act(
+        self,
+        scene: str,
+        scores: dict[str, dict[str, float]],
+        threshold: float | None,
+        senses: Sequence[str] = ("acoustic", "visual"),
+    ) -> None:
         """Move to the pose taught for a decided `scene`, if armed and sure enough: `scores` are
-        the senses' latest {sense: {scene: probability}}; the less sure sense must give the scene
-        at least `threshold` percent."""
+        the senses' latest {role: {scene: probability}}; the least sure of `senses` (the roles
+        the decision rests on) must give the scene at least `threshold` percent."""
         link, pose_for, pool = self.link, self.pose_for, self._pool
         if link is None or not link.armed:
             return
         if pose_for is None:
             self.bus.emit(Notice(self.bus.clock(), NO_POSE))
             return
-        confidence = 100.0 * min(scores[sense].get(scene, 0.0) for sense in ("acoustic", "visual"))
+        confidence = 100.0 * min(scores.get(sense, {}).get(scene, 0.0) for sense in senses)
         if threshold is not None and confidence < threshold:
             self.bus.emit(
                 Notice(

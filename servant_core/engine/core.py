@@ -56,7 +56,7 @@ from servant_core.events import (
     VisualPrediction,
 )
 from servant_core.features.palette import dominant_colours
-from servant_core.fusion import FusionConfig, FusionPolicy, SequentialFusion
+from servant_core.fusion import FusionConfig, FusionPolicy, LearnedFusion, SequentialFusion
 from servant_core.fusion.smoothing import SceneSmoother
 from servant_core.library import SceneLibrary
 from servant_core.recognisers import FRESH_METHODS, UNKNOWN, Recogniser
@@ -463,7 +463,13 @@ class Engine:
                 event = dataclasses.replace(event, confidence_unit=unit)
             self._emit(event)
             if isinstance(event, Decision) and event.scene is not None:
-                self._arm.act(event.scene, self.latest_scores(), self.confidence_threshold)
+                roles = tuple(SENSES[s].role for s in event.leaned_on if s in SENSES)
+                self._arm.act(
+                    event.scene,
+                    self.latest_scores(),
+                    self.confidence_threshold,
+                    roles or ("acoustic", "visual"),
+                )
 
     # --- the arm (see `arm.ArmControl`) -------------------------------------------------------
 
@@ -515,8 +521,11 @@ class Engine:
         with self._lock:
             # the policies of servant_core.fusion; unchanged windows keep the current one open
             if getattr(self.fusion, "config", config) != config:
-                policy: Any = type(self.fusion)
-                self.fusion = policy(config)
+                if isinstance(self.fusion, LearnedFusion):  # the net stays what it learned
+                    self.fusion = LearnedFusion(config, self.fusion.net)
+                else:
+                    policy: Any = type(self.fusion)
+                    self.fusion = policy(config)
             self.confidence_threshold = float(settings.confidence_threshold)
             state = self.fusion.state(self.clock())
         self._emit(state)
@@ -634,7 +643,30 @@ class Engine:
                 self.visual = new_visual or self.visual
                 self.sample_recognisers.update(new_samples)
                 self.retrain_needed = False
+            self._relearn_fusion(library)
             self._save_models()
+
+    def _relearn_fusion(self, library: SceneLibrary) -> None:
+        """The learned policy's net, taught again on the retrained recognisers (called under
+        `_update_lock`); too little taught, the parallel policy decides meanwhile, and a Notice
+        says why. The rule policies learn nothing."""
+        with self._lock:
+            if not isinstance(self.fusion, LearnedFusion):
+                return
+            recognisers = self._recognisers_by_sense()
+        net, why = learning.library_fusion_net(
+            library, recognisers, self.window_seconds, self._report_error
+        )
+        with self._lock:
+            self.fusion = LearnedFusion(self.fusion.config, net)
+            state = self.fusion.state(self.clock())
+        self._emit(state)
+        if net is None:
+            self._emit(Notice(self.clock(), f"learned fusion: {why}; the parallel policy decides"))
+
+    def _recognisers_by_sense(self) -> dict[str, Recogniser]:
+        found = {"audio": self.acoustic, "image": self.visual, **self.sample_recognisers}
+        return {sense: model for sense, model in found.items() if model is not None}
 
     def _refit_samples(
         self,
@@ -711,7 +743,8 @@ class Engine:
         with self._lock:
             models = {"acoustic": self.acoustic, "visual": self.visual}
             models.update({SENSES[s].role: m for s, m in self.sample_recognisers.items()})
-        learning.save_models(self.model_path, models, self._report_error)
+            net = getattr(self.fusion, "net", None)
+        learning.save_models(self.model_path, models, self._report_error, net)
 
 
 def fusion_config(settings: Any) -> FusionConfig:

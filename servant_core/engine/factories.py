@@ -15,7 +15,14 @@ from servant_core.capture.source import ManualClock, MonotonicClock
 from servant_core.engine.arm import Pose, PoseFor
 from servant_core.engine.core import Engine, fusion_config
 from servant_core.errors import ServantError
-from servant_core.fusion import POLICIES, FusionPolicy, SequentialFusion
+from servant_core.fusion import (
+    POLICIES,
+    FusionConfig,
+    FusionNet,
+    FusionPolicy,
+    LearnedFusion,
+    SequentialFusion,
+)
 from servant_core.fusion.smoothing import STEADY_FLOOR, STEADY_STAY, SceneSmoother
 from servant_core.senses import SAMPLE_SENSES, SENSES
 
@@ -109,6 +116,15 @@ def pose_for_taught(learner: Any) -> PoseFor:
     return pose_for
 
 
+def live_policy(name: str, config: FusionConfig, net: FusionNet | None = None) -> FusionPolicy:
+    """The fusion policy named `name` (`POLICIES`); the learned one with `net` (None: its
+    fallback, the parallel policy, until a net is taught)."""
+    if name == "learned":
+        return LearnedFusion(config, net)
+    policy: FusionPolicy = POLICIES[name](config)
+    return policy
+
+
 @dataclass(frozen=True)
 class LiveSettings:
     """What `build_live_engine` needs; every field has a sensible default.
@@ -151,12 +167,12 @@ def build_live_engine(
     from servant_core.capture.camera import Camera
     from servant_core.capture.microphone import Microphone
     from servant_core.capture.sensor_sources import sensor_sources
-    from servant_core.modelfile import load_model
+    from servant_core.modelfile import load_model_and_fusion
     from servant_core.settings import Settings
 
     settings = settings or LiveSettings()
     user = settings.user or Settings()
-    models = load_model(settings.model) if settings.model else {}
+    models, net = load_model_and_fusion(settings.model) if settings.model else ({}, None)
     streams = sensor_sources({"imu": settings.imu, "ambient": settings.ambient})
     samples = {s.name: streams[s.stream] for s in SAMPLE_SENSES.values() if s.stream in streams}
     engine = Engine(
@@ -164,7 +180,7 @@ def build_live_engine(
         camera=Camera(settings.camera) if settings.camera is not None else None,
         acoustic=models.get("acoustic"),
         visual=models.get("visual"),
-        fusion=fusion or POLICIES[settings.policy](fusion_config(user)),
+        fusion=fusion or live_policy(settings.policy, fusion_config(user), net),
         library_root=settings.library_root,
         model_path=settings.model_path or settings.model,
         confidence_threshold=user.confidence_threshold,
@@ -172,6 +188,11 @@ def build_live_engine(
         samples=samples,
         sample_recognisers={s: models[SENSES[s].role] for s in samples if SENSES[s].role in models},
     )
+    if isinstance(engine.fusion, LearnedFusion) and engine.fusion.net is None and models:
+        engine.note(
+            "learned fusion: the model has no net yet, so the parallel policy decides; Retrain "
+            "in the library (l, R) or `servant train --learned-fusion` teaches it"
+        )
     engine.connect_arm(user.serial_port, user.protocol, user.joints)
     learner_file = Path(settings.learner or default_learner_path())
     if settings.learner is not None or learner_file.is_file():

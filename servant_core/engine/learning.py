@@ -9,6 +9,7 @@ the old recogniser right now, never sees half of one.
 from __future__ import annotations
 
 import copy
+import functools
 import re
 import threading
 import time
@@ -26,9 +27,20 @@ from servant_core.capture.sample_files import read_samples
 from servant_core.capture.sensors import RATES
 from servant_core.errors import ServantError
 from servant_core.evaluate_motion import cut_sample_windows
+from servant_core.fusion.learned import FusionNet, SenseOpinions
+from servant_core.fusion.learning import (
+    DEFAULT_FOLDS,
+    fresh_copy,
+    held_out_opinions,
+    order_folds,
+    picture_opinions,
+    train_fusion_net,
+    window_opinions,
+)
 from servant_core.library import SampleFile, SceneLibrary, featurize_recordings, read_pictures
 from servant_core.modelfile import save_model
 from servant_core.recognisers import Recogniser, make_recogniser
+from servant_core.senses import SAMPLE_SENSES
 from servant_core.storage import atomic_write_bytes
 
 UNKNOWN_KEPT = 16  # unknown windows/pictures kept for the user to label, the oldest dropped first
@@ -144,11 +156,16 @@ def folded_in(recogniser: Any, kept: Kept, scene: str) -> Any:
     return model
 
 
-def save_models(path: Path, models: Mapping[str, Recogniser | None], on_error: OnError) -> None:
-    """Write the recognisers that exist to `path`. A failed write is reported; the file keeps
-    its previous content (atomic replace)."""
+def save_models(
+    path: Path,
+    models: Mapping[str, Recogniser | None],
+    on_error: OnError,
+    fusion: FusionNet | None = None,
+) -> None:
+    """Write the recognisers that exist (and the learned fusion's net) to `path`. A failed write
+    is reported; the file keeps its previous content (atomic replace)."""
     try:
-        save_model(path, {role: m for role, m in models.items() if m is not None})
+        save_model(path, {role: m for role, m in models.items() if m is not None}, fusion)
     except (OSError, ServantError) as error:
         on_error(
             ServantError(
@@ -167,16 +184,15 @@ def progress_part(on_progress: OnProgress | None, offset: int, total: int) -> On
     return lambda done, _part_total: report(offset + done, total)
 
 
-def refit_samples(
+def sample_windows(
     files: Sequence[SampleFile],
     stream: str,
-    model: Any,
+    rate: int,
     window_seconds: float,
     on_error: OnError,
     on_progress: OnProgress | None = None,
-) -> Any:
-    """`model` fitted on the windows of a sample sense's logs; None if none gives a window."""
-    rate = int(getattr(model, "rate", RATES[stream]))
+) -> tuple[list[np.ndarray], list[str]]:
+    """The windows of a sample sense's logs at `rate`, in file order, and each one's scene."""
     windows: list[np.ndarray] = []
     scenes: list[str] = []
     for done, file in enumerate(files, start=1):
@@ -189,9 +205,60 @@ def refit_samples(
         scenes += [file.scene] * len(cut)
         if on_progress is not None:
             on_progress(done, len(files))
+    return windows, scenes
+
+
+def refit_samples(
+    files: Sequence[SampleFile],
+    stream: str,
+    model: Any,
+    window_seconds: float,
+    on_error: OnError,
+    on_progress: OnProgress | None = None,
+) -> Any:
+    """`model` fitted on the windows of a sample sense's logs; None if none gives a window."""
+    rate = int(getattr(model, "rate", RATES[stream]))
+    windows, scenes = sample_windows(files, stream, rate, window_seconds, on_error, on_progress)
     if not windows:
         return None
     return model.fit(model.featurize(windows), scenes)
+
+
+def library_fusion_net(
+    library: SceneLibrary,
+    recognisers: Mapping[str, Any],
+    window_seconds: float,
+    on_error: OnError,
+) -> tuple[FusionNet | None, str | None]:
+    """The learned fusion's net for these recognisers ({sense: recogniser}), trained on the
+    opinions fresh copies of them give of the library's items they were not fitted on (see
+    `fusion.learning`); (None, why) when too little was taught."""
+    opinions: dict[str, SenseOpinions] = {}
+    audio, image = recognisers.get("audio"), recognisers.get("image")
+    if audio is not None and library.recordings:
+        rate = getattr(audio, "rate", DEFAULT_RATE)
+        windows = featurize_recordings(
+            library.recordings, audio.featurize, rate, window_seconds, on_error
+        )
+        opinions["audio"] = window_opinions(audio, windows)
+    if image is not None and library.pictures:
+        pictures, kept = read_pictures(library.pictures, on_error=on_error)
+        if pictures:
+            opinions["image"] = picture_opinions(image, image.featurize(pictures), kept)
+    for sense, files in library.samples.items():
+        model, stream = recognisers.get(sense), SAMPLE_SENSES[sense].stream
+        if model is None or stream is None:
+            continue
+        rate = int(getattr(model, "rate", RATES[stream]))
+        cut, scenes = sample_windows(files, stream, rate, window_seconds, on_error)
+        if cut:
+            opinions[sense] = held_out_opinions(
+                functools.partial(fresh_copy, model),
+                model.featurize(cut),
+                scenes,
+                order_folds(scenes, DEFAULT_FOLDS),
+            )
+    return train_fusion_net(opinions)
 
 
 def resampled_rows(rows: np.ndarray, rate: int, to_rate: int) -> np.ndarray:
