@@ -153,8 +153,12 @@ class ServantApp(App[None]):
         self.engine.stop()
 
     @on(SpectrumUpdate)
+    def _spectrum(self, message: SpectrumUpdate) -> None:
+        for screen in self._event_screens():
+            screen.show_event(message.frame)
+
     @on(SensorUpdate)
-    def _frame(self, message: SpectrumUpdate | SensorUpdate) -> None:
+    def _sensor(self, message: SensorUpdate) -> None:
         for screen in self._event_screens():
             screen.show_event(message.frame)
 

@@ -95,6 +95,11 @@ async def test_the_motion_pane_traces_the_walk_and_says_what_each_sense_judged(t
         assert "motion: street (77.0 %)" in log and "ambient: CoffeeScene (91.0 %)" in log
         assert "CoffeeScene detected (90.1 %; leaned on sound, motion)" in log
 
+        # a place the ambient sense does not know: no confidence in no scene
+        engine.emit(SensePrediction(60.0, "ambient", None, 100.0, {}, "%"))
+        await settle(pilot, lambda: "unknown" in plain(motion.said))
+        assert plain(motion.said) == "motion street 77.0 % · ambient an unknown place"
+
         # the board unplugged: said on the pane, in red, until it reads again
         engine.emit(DeviceStatus(61.0, "imu", False, "/dev/pts/4: the sensor board stopped"))
         await settle(pilot, lambda: "stopped" in plain(motion.values))

@@ -183,11 +183,11 @@ class MotionPane(Vertical):
             if said is None:
                 parts.append(Text.assemble((f"{sense} ", "bold"), ("–", "grey50")))
                 continue
-            confidence = confidence_text(said.confidence, said.confidence_unit)
             # the spaces end the styled runs (see ServantApp.log_line)
-            parts.append(
-                Text.assemble((f"{sense} ", "bold"), (f"{place(said.scene)} ", "cyan"), confidence)
-            )
+            line = Text.assemble((f"{sense} ", "bold"), (place(said.scene), "cyan"))
+            if said.scene:  # a confidence in no scene says nothing
+                line.append(f" {confidence_text(said.confidence, said.confidence_unit)}")
+            parts.append(line)
         return Text(" · ").join(parts)
 
     def _show_values(self) -> None:
