@@ -21,14 +21,17 @@ from servant_core.events import (
     DeviceStatus,
     ErrorEvent,
     Notice,
+    SensePrediction,
+    SensorFrame,
     SpectrumFrame,
     UnknownScene,
     VisualPrediction,
 )
 from servant_core.storage import data_dir
-from servant_tui.messages import EngineEvent, SpectrumUpdate, TrainingDone
+from servant_tui.messages import EngineEvent, SensorUpdate, SpectrumUpdate, TrainingDone
 from servant_tui.screens.dialogs import HelpScreen, LabelPrompt
 from servant_tui.screens.live import LiveScreen, device_message
+from servant_tui.widgets.scene import leaned_text
 from servant_tui.widgets.text import clock, error_text
 
 
@@ -84,7 +87,7 @@ class ServantApp(App[None]):
         self._settings = settings
         self.arm_state: ArmState | None = None
         self.seen_scenes: set[str] = set()
-        self.live = LiveScreen()
+        self.live = LiveScreen(sample_senses=getattr(engine, "sample_senses", ()))
         self._prompt_open = False
         self._quiet_until: float | None = None  # engine time before which no place is asked about
         self._noticed: set[str] = set()
@@ -130,6 +133,8 @@ class ServantApp(App[None]):
         """Called on engine threads: hand the event to the UI thread as a message, nothing more."""
         if isinstance(event, SpectrumFrame):
             self.post_message(SpectrumUpdate(event))
+        elif isinstance(event, SensorFrame):
+            self.post_message(SensorUpdate(event))
         else:
             self.post_message(EngineEvent(event))
 
@@ -149,6 +154,11 @@ class ServantApp(App[None]):
 
     @on(SpectrumUpdate)
     def _spectrum(self, message: SpectrumUpdate) -> None:
+        for screen in self._event_screens():
+            screen.show_event(message.frame)
+
+    @on(SensorUpdate)
+    def _sensor(self, message: SensorUpdate) -> None:
         for screen in self._event_screens():
             screen.show_event(message.frame)
 
@@ -186,9 +196,13 @@ class ServantApp(App[None]):
     @staticmethod
     def _log_text(event: Any) -> str | None:
         if isinstance(event, Decision):
+            leaned = leaned_text(event)
+            because = f"; {leaned}" if leaned else ""
             if event.scene:
                 confidence = confidence_text(event.confidence, event.confidence_unit)
-                return f"[bold green]{escape(event.line)} [/]({confidence})"
+                return f"[bold green]{escape(event.line)} [/]({confidence}{because})"
+            if leaned:
+                return f"[yellow]{escape(event.line)} [/]({leaned})"
             return f"[yellow]{escape(event.line)}[/]"
         if isinstance(event, (AcousticPrediction, VisualPrediction)):
             verb = "hears" if isinstance(event, AcousticPrediction) else "sees"
@@ -196,6 +210,11 @@ class ServantApp(App[None]):
                 return f"{verb} {place(None)}"
             confidence = confidence_text(event.confidence, event.confidence_unit)
             return f"{verb} {escape(place(event.scene))} ({confidence})"
+        if isinstance(event, SensePrediction):
+            if event.scene is None:
+                return f"{event.sense}: {place(None)}"
+            confidence = confidence_text(event.confidence, event.confidence_unit)
+            return f"{event.sense}: {escape(place(event.scene))} ({confidence})"
         if isinstance(event, UnknownScene):
             nearest = f", nearest {escape(event.nearest_scene)}" if event.nearest_scene else ""
             return f"[magenta]unknown place ({event.sense}{nearest}): asking for a label[/]"

@@ -10,11 +10,12 @@ from typing import Any
 
 from textual.message import Message
 
-from servant_core.events import SpectrumFrame
+from servant_core.events import SensorFrame, SpectrumFrame
 
 
 class EngineEvent(Message):
-    """Any engine event but a spectrum frame (those have their own, droppable, message)."""
+    """Any engine event but spectrum and sensor frames (those have their own, droppable,
+    messages)."""
 
     def __init__(self, event: Any) -> None:
         super().__init__()
@@ -32,13 +33,27 @@ class SpectrumUpdate(Message):
         return isinstance(message, SpectrumUpdate)
 
 
-class RecordingDone(Message):
-    """A teach window finished recording and was saved into the scene library."""
+class SensorUpdate(Message):
+    """A sample sense's latest readings (a few a second per sense): a newer frame of the same
+    sense replaces one still queued."""
 
-    def __init__(self, path: Any, seconds: float) -> None:
+    def __init__(self, frame: SensorFrame) -> None:
+        super().__init__()
+        self.frame = frame
+
+    def can_replace(self, message: Message) -> bool:
+        return isinstance(message, SensorUpdate) and message.frame.sense == self.frame.sense
+
+
+class RecordingDone(Message):
+    """A teach window finished recording and was saved into the scene library: the sound at
+    `path`, and `samples` the sample senses' logs of the same seconds written beside it."""
+
+    def __init__(self, path: Any, seconds: float, samples: tuple[Any, ...] = ()) -> None:
         super().__init__()
         self.path = path
         self.seconds = seconds
+        self.samples = samples
 
 
 class PictureTaken(Message):

@@ -50,7 +50,7 @@ def test_servant_demo_shows_panes_and_a_detection_in_tmux(tmp_path):
             screen = capture(session)
             if "detected" in screen:
                 break
-        for title in ("Spectrum", "Scene", "Colours", "Arm", "Log"):
+        for title in ("Spectrum", "Motion", "Scene", "Colours", "Arm", "Log"):
             assert title in screen, f"pane {title!r} missing from the terminal:\n{screen}"
         assert "detected" in screen, f"no detection line after 120 s:\n{screen}"
         subprocess.run(["tmux", "send-keys", "-t", session, "q"], check=True)

@@ -20,7 +20,7 @@ from servant_tui.screens.library import LibraryScreen
 from servant_tui.screens.teach import TeachScreen
 from tests.test_tui_live import settle
 from tests.tui_library import write_library
-from tests.tui_replay import ReplayEngine, unknown_scene_script
+from tests.tui_replay import ReplayEngine, sensing_script, unknown_scene_script
 
 SIZES = [
     pytest.param((80, 24), id="80x24"),
@@ -54,6 +54,15 @@ def replayed(app: ServantApp, then: tuple[str, ...] = (), until=None):
 def test_live_screen(snap_compare, size, library):
     app = ServantApp(ReplayEngine(), mode="demo", library_root=library)
     assert snap_compare(app, terminal_size=size, run_before=replayed(app))
+
+
+@pytest.mark.parametrize("size", SIZES[:2])
+def test_live_screen_with_motion(snap_compare, size, library):
+    """Worn with the sensor board: the walk's trace, each sense's judgement, the ambient values
+    and the senses the last decision leaned on (at 80x24 beside the spectrum, condensed)."""
+    app = ServantApp(ReplayEngine(sensing_script()), mode="demo", library_root=library)
+    until = lambda app: len(app.live.scene.decisions) == 3 and app.live.motion.trace.frames_shown  # noqa: E731
+    assert snap_compare(app, terminal_size=size, run_before=replayed(app, (), until))
 
 
 @pytest.mark.parametrize("size", SIZES)

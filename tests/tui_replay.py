@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -22,10 +23,13 @@ from servant_core.events import (
     DeviceStatus,
     FusionState,
     Palette,
+    SensePrediction,
+    SensorFrame,
     SpectrumFrame,
     UnknownScene,
     VisualPrediction,
 )
+from servant_core.senses import SAMPLE_SENSES
 
 RATE = 44100
 JOINTS = {"shoulder": 90.0, "elbow": 45.0, "wrist": 120.0}
@@ -82,6 +86,69 @@ def demo_script() -> list[Any]:
     ]
 
 
+IMU_RATE = 50
+AMBIENT_RATE = 2
+
+
+def walking_frame(t: float, seconds: float = 10.0) -> SensorFrame:
+    """The last `seconds` of an IMU worn while walking: gravity on z, a 2 Hz step bounce of
+    ±4 m/s², a little sway and turning; the same for the same `t`."""
+    n = int(seconds * IMU_RATE)
+    times = t - seconds + np.arange(1, n + 1) / IMU_RATE
+    step = np.sin(2 * np.pi * 2.0 * times)
+    rows = np.column_stack(
+        [
+            0.8 * np.sin(2 * np.pi * 1.0 * times),
+            0.3 * np.cos(2 * np.pi * 1.0 * times),
+            9.81 + 4.0 * step,
+            5.0 * step,
+            2.0 * np.cos(2 * np.pi * 2.0 * times),
+            1.0 + 0.0 * times,
+        ]
+    ).astype(np.float32)
+    return SensorFrame(t, "motion", ("ax", "ay", "az", "gx", "gy", "gz"), rows, IMU_RATE)
+
+
+def ambient_frame(t: float) -> SensorFrame:
+    """A café's light, warmth and pressure over the last 10 s."""
+    rows = np.tile(np.float32([[312.0, 21.5, 1013.2]]), (10 * AMBIENT_RATE, 1))
+    return SensorFrame(t, "ambient", ("lux", "celsius", "hpa"), rows, AMBIENT_RATE)
+
+
+@dataclass(frozen=True)
+class LeaningDecision(Decision):
+    """A learned fusion's decision and the senses it leaned on (`Decision.leaned_on` on the
+    branch that adds the learned fusion; the TUI reads it with getattr until then)."""
+
+    leaned_on: tuple[str, ...] = ()
+
+
+def sensing_script() -> list[Any]:
+    """The afternoon of `demo_script` worn with the sensor board: the motion and ambient senses
+    judge each window too, and the last decision leaned on sound and motion."""
+    return [
+        *demo_script()[:4],
+        DeviceStatus(0.0, "imu", True, "/dev/pts/4: reading at 50 Hz"),
+        DeviceStatus(0.0, "ambient", True, "/dev/pts/4: reading at 2 Hz"),
+        *demo_script()[4:-1],
+        SensePrediction(53.0, "motion", "street", 77.0, {"street": 0.77, "coffee": 0.2}, "%"),
+        SensePrediction(53.0, "ambient", "CoffeeScene", 91.0, {"CoffeeScene": 0.91}, "%"),
+        LeaningDecision(
+            58.0,
+            "CoffeeScene",
+            90.1,
+            "CoffeeScene detected",
+            88.0,
+            0.0,
+            "%",
+            leaned_on=("audio", "motion"),
+        ),
+        ambient_frame(60.5),
+        walking_frame(60.5),
+        spectrum_frame(60.5),
+    ]
+
+
 class ReplayEngine:
     """Emits `script` on `start()`, in order, from the calling thread; records what it is asked."""
 
@@ -105,6 +172,12 @@ class ReplayEngine:
         self.pictures_taken = 0
         self.t = 0.0
         self._arm: ArmState | None = None
+
+    @property
+    def sample_senses(self) -> list[str]:
+        """The sample senses of the script (as an engine knows its sources before it starts)."""
+        said = {e.sense for e in self.script if isinstance(e, (SensePrediction, SensorFrame))}
+        return [s for s in SAMPLE_SENSES if s in said]
 
     def subscribe(self, callback: Callable[[Any], None]) -> None:
         self.callbacks.append(callback)

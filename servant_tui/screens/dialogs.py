@@ -21,8 +21,9 @@ for it. The **live** screen shows:
 | pane | what it shows |
 |---|---|
 | Spectrum | the microphone's spectrum, log frequency, dB re full scale |
+| Motion | acceleration over 10 s (gravity fills half), light, warmth, pressure (`--imu PORT`) |
 | Colours | the frame's dominant colours and shares, beside the training palette they matched |
-| Scene | what is heard and seen, the confirmation window, the decisions so far |
+| Scene | what each sense says, the confirmation window, the decisions and what they leaned on |
 | Arm | the serial link, armed or not, each joint's angle and the pose about to be sent |
 | Log | every decision (`CoffeeScene detected`, `No scene detected`) and every problem |
 

@@ -1,20 +1,32 @@
-"""The live screen: spectrum, colours, scene, arm and the event log, side by side."""
+"""The live screen: spectrum and motion, colours, scene, arm and the event log, side by side."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from rich.markup import escape
 from textual.app import ComposeResult
-from textual.containers import Grid
+from textual.containers import Grid, Vertical
 from textual.screen import Screen
 from textual.widgets import Footer, Header, RichLog, Static
 
-from servant_core.events import ArmState, DeviceStatus, Palette, SpectrumFrame
+from servant_core.events import (
+    ArmState,
+    DeviceStatus,
+    Palette,
+    SensePrediction,
+    SensorFrame,
+    SpectrumFrame,
+)
+from servant_core.senses import SAMPLE_SENSES
 from servant_tui.widgets.arm import ArmPane
 from servant_tui.widgets.colours import ColoursPane
+from servant_tui.widgets.motion import MotionPane
 from servant_tui.widgets.scene import ScenePane
 from servant_tui.widgets.spectrum import Spectrum
 
 DEVICES = ("microphone", "camera", "servo")
+SAMPLE_DEVICES = {s.device for s in SAMPLE_SENSES.values()}  # imu, ambient: the motion pane's
 
 
 def device_message(status: DeviceStatus) -> str:
@@ -65,17 +77,20 @@ class DeviceBar(Static):
 class LiveScreen(Screen[None]):
     """What the wearer sees while Servant runs; the base of the screen stack."""
 
-    def __init__(self) -> None:
+    def __init__(self, sample_senses: Sequence[str] = ()) -> None:
+        """`sample_senses`: the engine's sample senses (motion, ambient) in use, if any."""
         super().__init__()
         # Built here, not in compose: engine events may arrive before the screen is mounted.
         self.devices = DeviceBar()
         self.spectrum = Spectrum(id="spectrum")
-        self.scene = ScenePane(id="scene")
+        self.motion = MotionPane(sample_senses, id="motion")
+        self.scene = ScenePane(id="scene", sample_senses=sample_senses)
         self.colours = ColoursPane(id="colours")
         self.arm = ArmPane(id="arm")
         self.log_view = RichLog(id="log", max_lines=500, markup=True, wrap=True, min_width=20)
         titles = (
             (self.spectrum, "Spectrum"),
+            (self.motion, "Motion |a| m/s², 10 s"),
             (self.scene, "Scene"),
             (self.colours, "Colours"),
             (self.arm, "Arm"),
@@ -88,7 +103,9 @@ class LiveScreen(Screen[None]):
         yield Header()
         yield self.devices
         with Grid(id="panes"):
-            yield self.spectrum
+            with Vertical(id="signals"):
+                yield self.spectrum
+                yield self.motion
             yield self.scene
             yield self.colours
             yield self.arm
@@ -98,6 +115,11 @@ class LiveScreen(Screen[None]):
     def show_event(self, event: object) -> None:
         if isinstance(event, SpectrumFrame):
             self.spectrum.show_frame(event)
+        elif isinstance(event, SensorFrame):
+            self.motion.show_frame(event)
+        elif isinstance(event, SensePrediction):
+            self.motion.show_prediction(event)
+            self.scene.show_event(event)
         elif isinstance(event, Palette):
             self.colours.show_palette(event)
         elif isinstance(event, ArmState):
@@ -107,6 +129,8 @@ class LiveScreen(Screen[None]):
             self.devices.show_status(event)
             if event.device == "servo":
                 self.arm.show_problem(None if event.ok else device_message(event))
+            elif event.device in SAMPLE_DEVICES:
+                self.motion.show_status(event)
         else:
             self.scene.show_event(event)
 

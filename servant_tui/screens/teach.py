@@ -7,6 +7,7 @@ each pose becomes a teach record. Training shows the action learner's error fall
 from __future__ import annotations
 
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -35,10 +36,12 @@ from textual.widgets import (
 )
 
 from servant_core.audio import DEFAULT_WINDOW_SECONDS, write_wav
+from servant_core.capture.sample_files import write_sample_csv
 from servant_core.errors import ServantError
 from servant_core.events import SpectrumFrame
 from servant_core.features.palette import dominant_colours
 from servant_core.library import SceneLibrary
+from servant_core.senses import SENSES
 from servant_core.storage import atomic_write_bytes
 from servant_tui.messages import (
     PictureTaken,
@@ -65,6 +68,11 @@ STEPS = (
 
 def stamp() -> str:
     return datetime.now().strftime("teach-%Y%m%d-%H%M%S-%f")
+
+
+# A sample sense records the same seconds as the sound; one whose readings stopped says so this
+# long after the sound has been recorded.
+SAMPLE_GRACE_SECONDS = 2.0
 
 
 # Where each step's worker says how it went.
@@ -134,7 +142,8 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
                     yield Button("Use this scene", id="use-scene", variant="primary")
                 with Vertical(id="sound"):
                     yield Label(
-                        f"Record {DEFAULT_WINDOW_SECONDS:g} s of the place's sound. Record a few."
+                        f"Record {DEFAULT_WINDOW_SECONDS:g} s of the place's sound"
+                        f"{self._with_senses()}. Record a few."
                     )
                     yield Button(
                         f"Record {DEFAULT_WINDOW_SECONDS:g} s", id="record", variant="primary"
@@ -183,6 +192,14 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
         self.query_one("#predictions", DataTable).add_columns("scene", *self.joints())
         self.query_one("#steps", OptionList).highlighted = 0
         self.set_interval(0.1, self._tick_recording, pause=False)
+
+    def sample_senses(self) -> list[str]:
+        """The engine's sample senses (motion, ambient): recorded with the sound."""
+        return list(getattr(self.app.engine, "sample_senses", ()))
+
+    def _with_senses(self) -> str:
+        senses = self.sample_senses()
+        return f", with its {' and '.join(senses)}" if senses else ""
 
     def show_event(self, event: object) -> None:
         if isinstance(event, SpectrumFrame):
@@ -263,15 +280,49 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
 
     @work(thread=True, exclusive=True, group="record", exit_on_error=False)
     def record(self, scene: str) -> None:
+        """The next seconds of sound into `<scene>/teach-….wav`, and the same seconds of each
+        sample sense beside it (`….imu.csv`, `….ambient.csv`). The sample senses record in
+        parallel with the sound, each on a thread of its own, since each records the seconds
+        from when it is asked. A sensor that fails loses only its own log: the sound is kept,
+        and the failure is one line in the log and a notification."""
+        engine = self.app.engine
+        senses = self.sample_senses()
+        folder, name = self.root / scene, stamp()
         try:
-            audio = np.asarray(
-                self.app.engine.record_window(DEFAULT_WINDOW_SECONDS), dtype=np.float32
-            )
-            rate = self.app.engine.audio_rate
-            path = write_wav(self.root / scene / f"{stamp()}.wav", audio, rate)
+            with ThreadPoolExecutor(max(len(senses), 1), thread_name_prefix="teach") as pool:
+                feeling = {
+                    sense: pool.submit(
+                        engine.record_samples,
+                        sense,
+                        DEFAULT_WINDOW_SECONDS,
+                        DEFAULT_WINDOW_SECONDS + SAMPLE_GRACE_SECONDS,
+                    )
+                    for sense in senses
+                }
+                audio = np.asarray(engine.record_window(DEFAULT_WINDOW_SECONDS), dtype=np.float32)
+                rate = engine.audio_rate
+                path = write_wav(folder / f"{name}.wav", audio, rate)
+                logs = [self._write_log(folder, name, s, f, path) for s, f in feeling.items()]
         finally:
             self.app.call_from_thread(self._recording_over)
-        self.post_message(RecordingDone(path, len(audio) / rate))
+        written = tuple(log for log in logs if log is not None)
+        self.post_message(RecordingDone(path, len(audio) / rate, written))
+
+    def _write_log(
+        self, folder: Path, name: str, sense: str, recording: Future[Any], sound: Path
+    ) -> Path | None:
+        """Write a sample sense's recording beside the sound; None (said in one line) if the
+        sensor failed."""
+        try:
+            rows, rate = recording.result()
+        except ServantError as error:
+            self.app.call_from_thread(
+                self.app.report_error,
+                ServantError(f"{sense}: not recorded ({error}); the sound {sound.name} was kept"),
+            )
+            return None
+        kind = SENSES[sense]
+        return write_sample_csv(folder / f"{name}{kind.suffixes[0]}", rows, rate, str(kind.stream))
 
     def _recording_over(self) -> None:
         self._recording_started = None
@@ -281,11 +332,13 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
     def recorded(self, message: RecordingDone) -> None:
         self.windows += 1
         self.query_one("#record-progress", ProgressBar).update(progress=DEFAULT_WINDOW_SECONDS)
+        logs = ", ".join(p.name for p in message.samples)
         self.query_one("#sound-status", Static).update(
             f"{self.windows} window(s) recorded; last: {message.path.name} "
-            f"({message.seconds:.1f} s)"
+            f"({message.seconds:.1f} s)" + (f" with {logs}" if logs else "")
         )
-        self.app.log_line(None, f"recorded {message.path}")
+        for path in (message.path, *message.samples):
+            self.app.log_line(None, f"recorded {path}")
 
     # -- 3 pictures -------------------------------------------------------------------------------
 

@@ -3,19 +3,44 @@
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Sequence
 
 from rich.table import Table
 from rich.text import Text
 from textual.widgets import Static
 
 from servant_core.event_text import confidence_text
-from servant_core.events import AcousticPrediction, Decision, FusionState, VisualPrediction
+from servant_core.events import (
+    AcousticPrediction,
+    Decision,
+    FusionState,
+    SensePrediction,
+    VisualPrediction,
+)
+from servant_core.senses import SAMPLE_SENSES
 from servant_tui.widgets.text import bar, clock
 
 HISTORY = 5
 # A sense's row: the scene, then its confidence ending at this column when the scene leaves room
 # (a percentage always does; the paper's eq. 1, often thousands below zero, may not).
 PREDICTION_WIDTH = 20
+# Rows a short pane leaves out, first to go first (the decisions' history goes before them): a
+# pane at 80x24 with motion and ambient keeps what each sense says and what was decided.
+OPTIONAL_ROWS = ("pictures", "window", "average")
+# How a decision names the senses it leaned on; a sample sense by its own name
+SENSE_WORDS = {"audio": "sound", "image": "pictures"}
+
+
+def sense_words(senses: Sequence[str]) -> str:
+    """ "sound, motion": senses by the words the panes use for them."""
+    return ", ".join(SENSE_WORDS.get(s, s) for s in senses)
+
+
+def leaned_text(decision: Decision) -> str | None:
+    """ "leaned on sound, motion": the senses a learned fusion leaned on; None for the rule
+    policies, whose decisions do not say."""
+    leaned = getattr(decision, "leaned_on", ())
+    return f"leaned on {sense_words(leaned)}" if leaned else None
 
 
 class ScenePane(Static):
@@ -23,15 +48,28 @@ class ScenePane(Static):
     ScenePane { height: 1fr; }
     """
 
-    def __init__(self, *, confirm_window_s: float = 30.0, id: str | None = None) -> None:
+    def __init__(
+        self,
+        *,
+        confirm_window_s: float = 30.0,
+        sample_senses: Sequence[str] = (),
+        id: str | None = None,
+    ) -> None:
         super().__init__(id=id)
         self.confirm_window_s = confirm_window_s
         self.heard: AcousticPrediction | None = None
         self.seen: VisualPrediction | None = None
+        # a row for each sample sense in use, or heard from
+        self.felt: dict[str, SensePrediction | None] = {
+            s: None for s in SAMPLE_SENSES if s in sample_senses
+        }
         self.fusion: FusionState | None = None
         self.decisions: deque[Decision] = deque(maxlen=HISTORY)
 
     def on_mount(self) -> None:
+        self.update(self._render_state())
+
+    def on_resize(self) -> None:
         self.update(self._render_state())
 
     def show_event(self, event: object) -> None:
@@ -39,6 +77,8 @@ class ScenePane(Static):
             self.heard = event
         elif isinstance(event, VisualPrediction):
             self.seen = event
+        elif isinstance(event, SensePrediction):
+            self.felt[event.sense] = event
         elif isinstance(event, FusionState):
             self.fusion = event
         elif isinstance(event, Decision):
@@ -48,37 +88,62 @@ class ScenePane(Static):
         self.update(self._render_state())
 
     def _render_state(self) -> Table:
+        rows = self._rows()
+        height = self.size.height
+        if height:  # before the first layout there is no height to fit yet
+            for optional in ("history", *OPTIONAL_ROWS):
+                while len(rows) > height and any(key == optional for key, *_ in rows):
+                    last = max(i for i, (key, *_) in enumerate(rows) if key == optional)
+                    del rows[last]
         table = Table.grid(padding=(0, 1))
         table.add_column(style="bold", no_wrap=True, min_width=8)
         table.add_column(no_wrap=True)
-        for name, prediction in (("hears", self.heard), ("sees", self.seen)):
-            if prediction is None:
-                table.add_row(name, Text("–", "grey50"))
-            else:
-                scene = prediction.scene or "unknown place"
-                confidence = confidence_text(
-                    prediction.confidence, prediction.confidence_unit, width=5
-                )
-                pad = max(len(scene) + 1, PREDICTION_WIDTH - len(confidence))
-                table.add_row(name, Text.assemble((scene.ljust(pad), "cyan"), confidence))
-        table.add_row("fusion", self._fusion_text())
-        table.add_row("window", self._window_text())
+        for _, label, text in rows:
+            table.add_row(label, text)
+        return table
+
+    def _rows(self) -> list[tuple[str, Text | str, Text | str]]:
+        """(key, label, text) of each row: the key says which rows a short pane may drop."""
+        rows: list[tuple[str, Text | str, Text | str]] = []
+        senses = (("hears", self.heard), ("sees", self.seen), *self.felt.items())
+        for name, prediction in senses:
+            rows.append(("sense", name, self._prediction_text(prediction)))
+        rows.append(("fusion", "fusion", self._fusion_text()))
+        rows.append(("window", "window", self._window_text()))
         pictures = self.fusion.pictures_taken if self.fusion else 0
-        table.add_row("pictures", str(pictures))
+        rows.append(("pictures", "pictures", str(pictures)))
         last = self.decisions[0] if self.decisions else None
         if last is None:
-            table.add_row("decided", Text("nothing yet", "grey50"))
+            rows.append(("decided", "decided", Text("nothing yet", "grey50")))
         else:
             style = "bold green" if last.scene else "yellow"
-            table.add_row("decided", Text(last.line, style))
+            rows.append(("decided", "decided", Text(last.line, style)))
             average = confidence_text(last.confidence, last.confidence_unit)
-            table.add_row("", f"average {average}")
+            rows.append(("average", "", f"average {average}"))
+            if getattr(last, "leaned_on", ()):
+                # "leaned on …" across the columns: the line is too narrow for it after a blank
+                on = sense_words(last.leaned_on)
+                rows.append(("leaned", "leaned", Text(f"on {on}", "green")))
         for decision in list(self.decisions)[1:]:
-            table.add_row(
-                Text(clock(decision.t), "grey50"),
-                Text(f"{decision.scene or '—':<14}{decision.confidence:5.1f}", "grey70"),
+            rows.append(
+                (
+                    "history",
+                    Text(clock(decision.t), "grey50"),
+                    Text(f"{decision.scene or '—':<14}{decision.confidence:5.1f}", "grey70"),
+                )
             )
-        return table
+        return rows
+
+    @staticmethod
+    def _prediction_text(
+        prediction: AcousticPrediction | VisualPrediction | SensePrediction | None,
+    ) -> Text:
+        if prediction is None:
+            return Text("–", "grey50")
+        scene = prediction.scene or "unknown place"
+        confidence = confidence_text(prediction.confidence, prediction.confidence_unit, width=5)
+        pad = max(len(scene) + 1, PREDICTION_WIDTH - len(confidence))
+        return Text.assemble((scene.ljust(pad), "cyan"), confidence)
 
     def _fusion_text(self) -> Text:
         if self.fusion is None:
