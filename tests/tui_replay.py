@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -115,14 +114,6 @@ def ambient_frame(t: float) -> SensorFrame:
     return SensorFrame(t, "ambient", ("lux", "celsius", "hpa"), rows, AMBIENT_RATE)
 
 
-@dataclass(frozen=True)
-class LeaningDecision(Decision):
-    """A learned fusion's decision and the senses it leaned on (`Decision.leaned_on` on the
-    branch that adds the learned fusion; the TUI reads it with getattr until then)."""
-
-    leaned_on: tuple[str, ...] = ()
-
-
 def sensing_script() -> list[Any]:
     """The afternoon of `demo_script` worn with the sensor board: the motion and ambient senses
     judge each window too, and the last decision leaned on sound and motion."""
@@ -133,7 +124,7 @@ def sensing_script() -> list[Any]:
         *demo_script()[4:-1],
         SensePrediction(53.0, "motion", "street", 77.0, {"street": 0.77, "coffee": 0.2}, "%"),
         SensePrediction(53.0, "ambient", "CoffeeScene", 91.0, {"CoffeeScene": 0.91}, "%"),
-        LeaningDecision(
+        Decision(
             58.0,
             "CoffeeScene",
             90.1,

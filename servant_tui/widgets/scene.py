@@ -39,7 +39,7 @@ def sense_words(senses: Sequence[str]) -> str:
 def leaned_text(decision: Decision) -> str | None:
     """ "leaned on sound, motion": the senses a learned fusion leaned on; None for the rule
     policies, whose decisions do not say."""
-    leaned = getattr(decision, "leaned_on", ())
+    leaned = decision.leaned_on
     return f"leaned on {sense_words(leaned)}" if leaned else None
 
 
@@ -120,7 +120,7 @@ class ScenePane(Static):
             rows.append(("decided", "decided", Text(last.line, style)))
             average = confidence_text(last.confidence, last.confidence_unit)
             rows.append(("average", "", f"average {average}"))
-            if getattr(last, "leaned_on", ()):
+            if last.leaned_on:
                 # "leaned on …" across the columns: the line is too narrow for it after a blank
                 on = sense_words(last.leaned_on)
                 rows.append(("leaned", "leaned", Text(f"on {on}", "green")))
