@@ -52,6 +52,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     paper=args.paper,
                     library_root=space / "library",
                     on_progress=Progress("servant demo: learning the demo's places"),
+                    policy=args.policy,
                 ),
                 "demo",
             )

@@ -149,3 +149,15 @@ def test_record_samples_gives_the_next_seconds_of_readings():
     assert rate == 50 and rows.shape == (50, 6) and np.isfinite(rows).all()
     # a still café: gravity, about 9.8 m/s²
     assert 9.0 < float(np.linalg.norm(rows[:, :3], axis=1).mean()) < 10.6
+
+
+def test_the_demo_with_the_learned_fusion_decides_every_place_and_says_what_it_leaned_on():
+    """`servant demo --policy learned`: the net is taught on the demo's library at start-up and
+    decides from all four senses; every place of the walk is decided, each decision naming the
+    senses it leaned on."""
+    done = servant("demo", "--headless", "--fast", "--policy", "learned", "--duration", "96")
+    assert done.returncode == 0, done.stderr
+    decided = re.findall(r"(\w+)Scene detected .*leaned on ([\w, ]+)", done.stdout)
+    assert {scene for scene, _ in decided} == {"Coffee", "Gym", "Street"}, done.stdout
+    senses = {s.strip() for _, leaned in decided for s in leaned.split(",")}
+    assert senses <= {"audio", "image", "motion", "ambient"} and "motion" in senses

@@ -117,6 +117,12 @@ def register(subparsers: Any) -> None:
         "instead of the methods beyond it",
     )
     demo.add_argument(
+        "--policy",
+        choices=sorted(POLICIES),
+        help="fusion (default: parallel; sequential with --paper); `learned` teaches its net on "
+        "the demo's scenes first and shows which senses each decision leaned on",
+    )
+    demo.add_argument(
         "--fast", action="store_true", help="as fast as possible on a simulated clock (headless)"
     )
     _common(demo)
@@ -196,7 +202,11 @@ def run_demo(args: argparse.Namespace) -> int:
 
     with throwaway_space() as space:
         engine = build_demo_engine(
-            args.seed, realtime=not args.fast, paper=args.paper, library_root=space / "library"
+            args.seed,
+            realtime=not args.fast,
+            paper=args.paper,
+            library_root=space / "library",
+            policy=args.policy,
         )
         if args.fast:
             engine.subscribe(_printer(args.json))

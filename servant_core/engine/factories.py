@@ -6,6 +6,7 @@ raised here.
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,7 +22,6 @@ from servant_core.fusion import (
     FusionNet,
     FusionPolicy,
     LearnedFusion,
-    SequentialFusion,
 )
 from servant_core.fusion.smoothing import STEADY_FLOOR, STEADY_STAY, SceneSmoother
 from servant_core.senses import SAMPLE_SENSES, SENSES
@@ -36,6 +36,7 @@ def build_demo_engine(
     arm: bool = True,
     paper: bool = False,
     on_progress: Callable[[int, int], None] | None = None,
+    policy: str | None = None,
 ) -> Engine:
     """The built-in demo: recognisers trained on freshly synthesised scenes (a couple of seconds),
     then the synthesised walk (see `servant_core.demo.scenes`). By default Servant at its best:
@@ -45,12 +46,15 @@ def build_demo_engine(
     it stops. With `library_root`, the demo's training scenes are written there as a scene
     library (the demo's own throw-away space: see `servant_core.demo.space`), for the library
     screen and retrains. `on_progress(done, total)` follows the training (the slow part).
+    `policy` names the fusion policy (default: as above); "learned" teaches its net on the
+    demo's library first (a few seconds more).
 
     `realtime=False` runs the walk as fast as possible on a `ManualClock` (pass your own to read
     it), so events — times included — are the same on every run: use `engine.run_until(t)` for a
     thread-free deterministic run, or `start()` to stream them. With `realtime=True` the walk
     plays at real speed on `clock` (default: monotonic time).
     """
+    from servant_core.demo.motion_synth import write_sensor_library
     from servant_core.demo.scenes import (
         DemoCamera,
         demo_audio,
@@ -66,11 +70,18 @@ def build_demo_engine(
     samples, stop_emulator = demo_sensor_sources(
         seed, clock=clock if isinstance(clock, ManualClock) and not realtime else None
     )
+    sensing = train_sensor_recognisers(seed)
     if library_root is not None:
         write_demo_library(library_root, seed)
+        write_sensor_library(library_root, seed)
     audio = demo_audio(seed, realtime=realtime, clock=clock if not realtime else None)
+    why = None
     if fusion is None:
-        fusion = SequentialFusion() if paper else POLICIES["parallel"]()
+        policy = policy or ("sequential" if paper else "parallel")
+        net, why = None, None
+        if policy == "learned":
+            net, why = demo_fusion_net(seed, {"audio": acoustic, "image": visual, **sensing})
+        fusion = live_policy(policy, FusionConfig(), net)
     engine = Engine(
         audio=audio,
         camera=DemoCamera(clock, seed),
@@ -81,10 +92,12 @@ def build_demo_engine(
         library_root=library_root,
         smoother=None if paper else steady(),
         samples=samples,
-        sample_recognisers=train_sensor_recognisers(seed),
+        sample_recognisers=sensing,
     )
     if stop_emulator is not None:
         engine.add_cleanup(stop_emulator)
+    if fusion is not None and why is not None:
+        engine.note(f"learned fusion: {why}; the parallel policy decides")
     if arm:
         from servant_core.demo.arm import demo_learner, start_demo_arm
 
@@ -94,6 +107,24 @@ def build_demo_engine(
         engine.set_arm(link)
         engine.set_action_learner(pose_for_taught(demo_learner()))
     return engine
+
+
+def demo_fusion_net(seed: int, recognisers: dict[str, Any]) -> tuple[FusionNet | None, str | None]:
+    """The learned fusion's net for the demo's recognisers, taught on its library's held-out
+    opinions (written to a temporary folder and removed)."""
+    from servant_core.demo.motion_synth import write_sensor_library
+    from servant_core.demo.scenes import write_demo_library
+    from servant_core.engine.learning import library_fusion_net
+    from servant_core.library import SceneLibrary
+
+    with tempfile.TemporaryDirectory(prefix="servant-demo-fusion-") as folder:
+        write_demo_library(folder, seed)
+        write_sensor_library(folder, seed)
+        return library_fusion_net(SceneLibrary.scan(folder), recognisers, 5.0, _raise)
+
+
+def _raise(error: ServantError) -> None:
+    raise error
 
 
 def steady() -> SceneSmoother:

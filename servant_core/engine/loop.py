@@ -260,7 +260,9 @@ class Feeling:
 
     def close(self) -> None:
         self.source.close()
-        self.ok = False
+        with self._arrived:  # a recording waiting for readings learns at once that none come
+            self.ok = False
+            self._arrived.notify_all()
 
     def reopen_if_due(self, t: float) -> None:
         if not self.ok and t >= self._retry_at:
@@ -323,10 +325,11 @@ class Feeling:
         count = int(round(seconds * self.source.rate))
         with self._arrived:
             end = self._total + count
-            arrived = self._arrived.wait_for(
-                lambda: self._total >= end, timeout if timeout is not None else 2 * seconds + 2
+            self._arrived.wait_for(
+                lambda: self._total >= end or not self.ok,
+                timeout if timeout is not None else 2 * seconds + 2,
             )
-            if not arrived:
+            if self._total < end:
                 raise ServantError(f"{self.source.name}: the readings stopped; try again")
             rows = np.concatenate(self._kept)
             start = len(rows) - (self._total - end) - count
