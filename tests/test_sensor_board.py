@@ -271,3 +271,16 @@ def test_one_port_named_for_both_streams_is_one_board_and_a_folder_replays_by_sc
             sensor_sources({"imu": str(tmp_path)})
     finally:
         emulator.stop()
+
+
+def test_the_emulators_light_and_warmth_do_not_jump_within_one_stay():
+    """The board synthesises five seconds at a time; a window the engine cuts across two of
+    them must not see the room's light jump, as no real room's does (it once read as an unknown
+    place at every window of the live demo)."""
+    emulator = SensorEmulator(script_scene([("street", 1000.0)]), seed=5)
+    lines = [parse_line(line) for line in emulator.lines_between(0, 30).splitlines()]
+    ambient = np.array([r.values for r in lines if r is not None and r.kind == "ambient"])
+    assert len(ambient) == 60
+    stretches = np.log(ambient[:, 0]).reshape(6, 10).mean(axis=1)  # each 5 s stretch's light
+    assert np.ptp(stretches) < 0.1  # per-stretch noise only; a new spot would move it ~0.25
+    assert np.ptp(ambient[:, 1].reshape(6, 10).mean(axis=1)) < 0.2

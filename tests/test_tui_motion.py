@@ -99,6 +99,8 @@ async def test_the_motion_pane_traces_the_walk_and_says_what_each_sense_judged(t
         engine.emit(SensePrediction(60.0, "ambient", None, 100.0, {}, "%"))
         await settle(pilot, lambda: "unknown" in plain(motion.said))
         assert plain(motion.said) == "motion street 77.0 % · ambient an unknown place"
+        await settle(pilot, lambda: "ambient  unknown place" in plain(app.live.scene))
+        assert "100.0" not in plain(app.live.scene)  # nor in the scene pane
 
         # the board unplugged: said on the pane, in red, until it reads again
         engine.emit(DeviceStatus(61.0, "imu", False, "/dev/pts/4: the sensor board stopped"))

@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import threading
 import time
+import zlib
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -102,7 +103,11 @@ class SensorEmulator:
             else:
                 # the weather drifts by a couple of hPa over an hour
                 weather = SEA_LEVEL_HPA + 2.0 * np.sin(2 * np.pi * k * CHUNK_SECONDS / 3600)
-                chunk = synth_ambient(scene, rng, CHUNK_SECONDS, self.rates[kind], weather)
+                # where the wearer stands in a place: the same for every stretch of the place
+                place = np.random.default_rng(
+                    [self.seed, SENSOR_STREAM, 2, zlib.crc32(scene.encode())]
+                )
+                chunk = synth_ambient(scene, rng, CHUNK_SECONDS, self.rates[kind], weather, place)
             self._chunks = {k2: v for k2, v in self._chunks.items() if k2[1] >= k - 1}
             self._chunks[key] = chunk
         return self._chunks[key]

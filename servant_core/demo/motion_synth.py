@@ -142,14 +142,21 @@ def synth_ambient(
     seconds: float = DEFAULT_WINDOW_SECONDS,
     rate: int = AMBIENT_RATE,
     weather_hpa: float = SEA_LEVEL_HPA,
+    place: np.random.Generator | None = None,
 ) -> np.ndarray:
-    """(n, 3) float32 lux, °C, hPa in a demo scene, around its typical light and warmth."""
+    """(n, 3) float32 lux, °C, hPa in a demo scene, around its typical light and warmth.
+
+    Where one stands (by the window, in a corner) is drawn from `place` (default: `rng`): a
+    stream cut into stretches passes the same `place` for every stretch of one stay, or its
+    light and warmth would jump at each stretch's start, as no real room does."""
     lux, celsius = SCENE_AMBIENT[scene]
     n = int(round(seconds * rate))
-    level = lux * np.exp(rng.normal(0, 0.25))  # where one stands: by the window, in a corner
+    where = place if place is not None else rng
+    level = lux * np.exp(where.normal(0, 0.25))
+    warmth_offset, pressure_offset = where.normal(0, 0.7), where.normal(0, 0.3)
     light = level * np.exp(0.05 * rng.normal(size=n))
-    warmth = celsius + rng.normal(0, 0.7) + 0.05 * rng.normal(size=n)
-    pressure = weather_hpa + rng.normal(0, 0.3) + 0.03 * rng.normal(size=n)
+    warmth = celsius + warmth_offset + 0.05 * rng.normal(size=n)
+    pressure = weather_hpa + pressure_offset + 0.03 * rng.normal(size=n)
     return np.stack([light, warmth, pressure], axis=1).astype(np.float32)
 
 

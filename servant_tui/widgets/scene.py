@@ -140,7 +140,9 @@ class ScenePane(Static):
     ) -> Text:
         if prediction is None:
             return Text("–", "grey50")
-        scene = prediction.scene or "unknown place"
+        if prediction.scene is None:  # a confidence in no scene says nothing
+            return Text("unknown place", "yellow")
+        scene = prediction.scene
         confidence = confidence_text(prediction.confidence, prediction.confidence_unit, width=5)
         pad = max(len(scene) + 1, PREDICTION_WIDTH - len(confidence))
         return Text.assemble((scene.ljust(pad), "cyan"), confidence)
