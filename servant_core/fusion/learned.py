@@ -470,7 +470,8 @@ class LearnedFusion(AcousticWindow):
     def state(self, t: float) -> FusionState:
         if self.fallback is not None:
             return self.fallback.state(t)
-        scene, _, pooled = self._leading(t)
+        scene, top, pooled = self._leading(t)
+        scene = scene if top >= 0.5 else None  # a weak lead is no scene being confirmed
         pictures = sum(
             1 for o in self.opinions.get("image", []) if t - o.t <= self.stale_after("image")
         )
