@@ -7,9 +7,10 @@ length as the sound's, each judged by its recogniser. The engine's loop, the sce
 model file, retrain and the TUI work from this registry, so a new sample sense is:
 
 1. its stream on the sensor board (`capture.sensors.STREAMS`) or any `SampleSource`, its
-   features and its recogniser class (registered as a method for its sense name in
-   `recognisers.SENSE_METHODS`);
-2. one line in `SENSES` below.
+   features and its recogniser class (a `recognisers.base.Recogniser` whose `sense` is the
+   sense's name);
+2. one line in `SENSES` below, naming them: `recognisers` registers the recogniser from it
+   (`"module:Class"`, imported when the recognisers are, as an entry point would be).
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ from dataclasses import dataclass
 from servant_core.audio import AUDIO_SUFFIXES
 
 PICTURE_SUFFIXES = (".png", ".jpg", ".jpeg")
+CENTROIDS = "servant_core.recognisers.sensor_centroids"
+SAMPLE_METHOD = "kmeans"  # the method name a sample sense's recogniser is registered under
 
 
 @dataclass(frozen=True)
@@ -34,15 +37,18 @@ class Sense:
     suffixes: tuple[str, ...]
     stream: str | None = None
     label: str = ""
+    # a sample sense's recogniser as "module:Class", registered as its method `kmeans`
+    recogniser: str | None = None
 
     @property
     def sampled(self) -> bool:
         return self.stream is not None
 
 
-def sample_sense(name: str, stream: str, label: str) -> Sense:
-    """A sense read from a sensor stream, its library files `*.<stream>.csv`."""
-    return Sense(name, name, stream, (f".{stream}.csv",), stream, label)
+def sample_sense(name: str, stream: str, label: str, recogniser: str) -> Sense:
+    """A sense read from a sensor stream, its library files `*.<stream>.csv`, judged by the
+    `recogniser` class ("module:Class")."""
+    return Sense(name, name, stream, (f".{stream}.csv",), stream, label, recogniser)
 
 
 SENSES: dict[str, Sense] = {
@@ -50,8 +56,10 @@ SENSES: dict[str, Sense] = {
     for s in (
         Sense("audio", "acoustic", "microphone", AUDIO_SUFFIXES, label="sound"),
         Sense("image", "visual", "camera", PICTURE_SUFFIXES, label="pictures"),
-        sample_sense("motion", "imu", "motion"),
-        sample_sense("ambient", "ambient", "light, temperature, pressure"),
+        sample_sense("motion", "imu", "motion", f"{CENTROIDS}:MotionRecogniser"),
+        sample_sense(
+            "ambient", "ambient", "light, temperature, pressure", f"{CENTROIDS}:AmbientRecogniser"
+        ),
     )
 }
 SAMPLE_SENSES = {name: s for name, s in SENSES.items() if s.sampled}

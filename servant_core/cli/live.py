@@ -32,6 +32,7 @@ from servant_core.events import (
     UnknownScene,
     VisualPrediction,
 )
+from servant_core.senses import SAMPLE_SENSES
 from servant_core.storage import default_model_file
 
 RUN_DESCRIPTION = """Recognise the scene from the live microphone and camera and, once armed, move
@@ -71,16 +72,14 @@ def register(subparsers: Any) -> None:
         "--camera", help="camera index, video file or image pattern (default: Settings, else 0)"
     )
     run.add_argument("--no-camera", action="store_true", help="do not look")
-    run.add_argument(
-        "--imu",
-        help="motion: the sensor board's serial port, a motion log (*.imu.csv, as phone "
-        "sensor-logger apps export) or a folder of them (docs/sensors.md)",
-    )
-    run.add_argument(
-        "--ambient",
-        help="light, temperature and pressure: the sensor board's serial port (it may be the "
-        "--imu one), an *.ambient.csv log or a folder of them",
-    )
+    for sense in SAMPLE_SENSES.values():  # --imu, --ambient: one option per sample sense
+        run.add_argument(
+            f"--{sense.stream}",
+            metavar="PORT|LOG|FOLDER",
+            help=f"{sense.label}: the sensor board's serial port (one board may carry every "
+            f"sense), a log (*{sense.suffixes[0]}, as phone sensor-logger apps export) or a "
+            "folder of them (docs/sensors.md)",
+        )
     run.add_argument(
         "--port", help="the arm's serial port (default: Settings; see `servant servo list-ports`)"
     )
@@ -192,8 +191,11 @@ def live_settings(args: argparse.Namespace | None = None) -> LiveSettings:
         camera=None if args.no_camera else (args.camera if args.camera is not None else camera),
         user=user,
         policy=args.policy,
-        imu=args.imu,
-        ambient=args.ambient,
+        sensors={
+            s.stream: getattr(args, s.stream)
+            for s in SAMPLE_SENSES.values()
+            if s.stream and getattr(args, s.stream, None) is not None
+        },
     )
 
 

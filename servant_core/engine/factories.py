@@ -6,8 +6,9 @@ raised here.
 
 from __future__ import annotations
 
+import dataclasses
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -169,8 +170,9 @@ class LiveSettings:
     `policy`: the fusion policy's name (`servant_core.fusion.POLICIES`).
     `learner`: the action learner file teach mode trains (None: `default_learner_path()`, if
     there is one yet).
-    `imu`, `ambient`: the sensor board's serial port, a log (`*.imu.csv`, `*.ambient.csv`) or a
-    folder of logs, for the motion and ambient senses (None: not used).
+    `sensors`: {stream: the sensor board's serial port, a log or a folder of logs} for the
+    sample senses (`servant_core.senses`: "imu" for motion, "ambient"); a stream left out is not
+    used.
     """
 
     model: str | Path | None = None
@@ -183,8 +185,7 @@ class LiveSettings:
     user: Any = None
     policy: str = "parallel"
     learner: str | Path | None = None
-    imu: str | None = None
-    ambient: str | None = None
+    sensors: Mapping[str, str] = dataclasses.field(default_factory=dict)
 
 
 def build_live_engine(
@@ -204,7 +205,7 @@ def build_live_engine(
     settings = settings or LiveSettings()
     user = settings.user or Settings()
     models, net = load_model_and_fusion(settings.model) if settings.model else ({}, None)
-    streams = sensor_sources({"imu": settings.imu, "ambient": settings.ambient})
+    streams = sensor_sources(dict(settings.sensors))
     samples = {s.name: streams[s.stream] for s in SAMPLE_SENSES.values() if s.stream in streams}
     engine = Engine(
         audio=Microphone(settings.microphone, settings.rate) if settings.use_microphone else None,

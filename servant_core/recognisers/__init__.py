@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 from typing import Any, cast
 
 from servant_core.errors import ServantError
@@ -10,8 +11,8 @@ from servant_core.recognisers.bovw import BovwVisualRecogniser
 from servant_core.recognisers.codebook import CodebookAcousticRecogniser
 from servant_core.recognisers.kmeans_encoder import KMeansEncoderAcousticRecogniser
 from servant_core.recognisers.paper import PaperAcousticRecogniser, PaperVisualRecogniser
-from servant_core.recognisers.sensor_centroids import AmbientRecogniser, MotionRecogniser
 from servant_core.recognisers.softbovw import SoftBovwVisualRecogniser
+from servant_core.senses import SAMPLE_METHOD, SAMPLE_SENSES
 
 ACOUSTIC_METHODS: dict[str, type[Recogniser]] = {
     "paper": PaperAcousticRecogniser,
@@ -24,12 +25,22 @@ VISUAL_METHODS: dict[str, type[Recogniser]] = {
     "softbovw": SoftBovwVisualRecogniser,
 }
 
-# each sense's methods by name; a new sense is one line here
+
+def _entry(path: str) -> type[Recogniser]:
+    module, _, name = path.partition(":")
+    cls: type[Recogniser] = getattr(importlib.import_module(module), name)
+    return cls
+
+
+# each sense's methods by name: a sample sense's recogniser comes from its line in `SENSES`
 SENSE_METHODS: dict[str, dict[str, type[Recogniser]]] = {
     "audio": ACOUSTIC_METHODS,
     "image": VISUAL_METHODS,
-    "motion": {"kmeans": MotionRecogniser},
-    "ambient": {"kmeans": AmbientRecogniser},
+    **{
+        name: {SAMPLE_METHOD: _entry(sense.recogniser)}
+        for name, sense in SAMPLE_SENSES.items()
+        if sense.recogniser
+    },
 }
 
 
@@ -48,8 +59,7 @@ def make_audio_recogniser(method: str, **params: Any) -> AcousticRecogniser:
 FRESH_METHODS = {
     "audio": "kmeans-encoder",
     "image": "bovw",
-    "motion": "kmeans",
-    "ambient": "kmeans",
+    **{name: SAMPLE_METHOD for name in SAMPLE_SENSES},
 }
 
 
