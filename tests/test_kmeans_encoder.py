@@ -12,6 +12,7 @@ from servant_core.modelfile import load_model, save_model
 from servant_core.recognisers import UNKNOWN, make_recogniser
 from servant_core.recognisers.kmeans_encoder import (
     KMeansEncoderAcousticRecogniser,
+    eq_curves,
     equalised,
     triangle_encoding,
 )
@@ -43,9 +44,15 @@ def test_triangle_encoding_small_exact_case() -> None:
 
 def test_equaliser_colours_but_keeps_the_level() -> None:
     frames = np.zeros((4, 3, 10), np.float32)
-    out = equalised(frames, np.random.default_rng(0), 0.3)
-    np.testing.assert_allclose(out.mean(axis=-1), 0.0, atol=1e-6)
-    assert np.abs(out).max() > 0.01 and np.abs(out).max() <= 0.6 + 1e-6
+    curves = eq_curves(10, 0.3, 4)
+    assert curves.shape == (4, 10)
+    for curve in curves:
+        out = equalised(frames, curve)
+        np.testing.assert_allclose(out.mean(axis=-1), 0.0, atol=1e-6)
+        assert np.abs(out).max() > 0.01 and np.abs(out).max() <= 0.6 + 1e-6
+    # evenly turned: no two curves alike, and they cancel out on average
+    assert len({tuple(np.round(c, 6)) for c in curves}) == 4
+    np.testing.assert_allclose(curves.mean(axis=0), 0.0, atol=1e-6)
 
 
 def test_probabilities_sum_to_one_and_favour_the_truth(trained) -> None:
