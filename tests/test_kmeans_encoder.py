@@ -127,6 +127,20 @@ def test_model_file_round_trip(trained, tmp_path) -> None:
     assert list(loaded.predict(X)) == list(model.predict(X))
 
 
+@pytest.mark.parametrize("value", [0, 0.25, 1.5, -0.1])
+def test_model_file_crop_fraction_is_a_part_of_a_window(trained, tmp_path, value) -> None:
+    from tests.test_modelfile import refused_in_one_line, rewrite_header
+
+    model, _ = trained
+    path = save_model(tmp_path / "m.npz", {"acoustic": model})
+    params = lambda h: h["recognisers"]["acoustic"]["params"]  # noqa: E731
+    rewrite_header(path, lambda h: params(h).update(crop_fraction=value))
+    if 0 <= value <= 1:
+        assert load_model(path)["acoustic"].crop_fraction == value
+    else:
+        refused_in_one_line(path)
+
+
 def test_registered_and_unfitted_raises() -> None:
     model = make_recogniser("audio", "kmeans-encoder")
     with pytest.raises(NotFittedError):
