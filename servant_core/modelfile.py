@@ -54,6 +54,7 @@ PARAM_LIMITS: dict[str, tuple[float, float]] = {
     "fmin": (0.0, MAX_RATE / 2),
     "fmax": (0.0, MAX_RATE / 2),
     "n_mels": (1, 512),
+    "crop_fraction": (0.0, 1.0),  # kmeans-encoder: a part of a window
     "n_colours": (1, 64),
     "size": (8, 2048),
     "cell": (1, 256),

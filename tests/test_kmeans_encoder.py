@@ -12,6 +12,7 @@ from servant_core.modelfile import load_model, save_model
 from servant_core.recognisers import UNKNOWN, make_recogniser
 from servant_core.recognisers.kmeans_encoder import (
     KMeansEncoderAcousticRecogniser,
+    eq_curves,
     equalised,
     triangle_encoding,
 )
@@ -43,9 +44,35 @@ def test_triangle_encoding_small_exact_case() -> None:
 
 def test_equaliser_colours_but_keeps_the_level() -> None:
     frames = np.zeros((4, 3, 10), np.float32)
-    out = equalised(frames, np.random.default_rng(0), 0.3)
-    np.testing.assert_allclose(out.mean(axis=-1), 0.0, atol=1e-6)
-    assert np.abs(out).max() > 0.01 and np.abs(out).max() <= 0.6 + 1e-6
+    curves = eq_curves(10, 0.3, 4)
+    assert curves.shape == (4, 10)
+    for curve in curves:
+        out = equalised(frames, curve)
+        np.testing.assert_allclose(out.mean(axis=-1), 0.0, atol=1e-6)
+        assert np.abs(out).max() > 0.01 and np.abs(out).max() <= 0.6 + 1e-6
+    # evenly turned: no two curves alike, and they cancel out on average
+    assert len({tuple(np.round(c, 6)) for c in curves}) == 4
+    np.testing.assert_allclose(curves.mean(axis=0), 0.0, atol=1e-6)
+
+
+def test_equalised_copies_do_not_depend_on_the_random_state(trained) -> None:
+    """The random state picks the codebooks only: the frame statistics of every training row
+    (the windows, their equalised copies, their crops) are the same under two random states.
+    With equalisations drawn at random they were not, and few-shot figures swung with it."""
+    _, scenes = trained
+    X = KMeansEncoderAcousticRecogniser(**SMALL).featurize(
+        np.concatenate([scenes["low"][:2], scenes["mid"][:2]])
+    )
+    fits = [
+        KMeansEncoderAcousticRecogniser(**SMALL, random_state=seed).fit(
+            X, ["low"] * 2 + ["mid"] * 2
+        )
+        for seed in (0, 1)
+    ]
+    statistics = 3 * X.shape[-1]
+    a, b = (f.train_descriptors_[:, :statistics] for f in fits)
+    np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-6)
+    assert not np.allclose(fits[0].codebooks_, fits[1].codebooks_)
 
 
 def test_probabilities_sum_to_one_and_favour_the_truth(trained) -> None:
@@ -98,6 +125,20 @@ def test_model_file_round_trip(trained, tmp_path) -> None:
     X = model.featurize(scenes["mid"][:3])
     np.testing.assert_allclose(loaded.predict_proba(X), model.predict_proba(X))
     assert list(loaded.predict(X)) == list(model.predict(X))
+
+
+@pytest.mark.parametrize("value", [0, 0.25, 1.5, -0.1])
+def test_model_file_crop_fraction_is_a_part_of_a_window(trained, tmp_path, value) -> None:
+    from tests.test_modelfile import refused_in_one_line, rewrite_header
+
+    model, _ = trained
+    path = save_model(tmp_path / "m.npz", {"acoustic": model})
+    params = lambda h: h["recognisers"]["acoustic"]["params"]  # noqa: E731
+    rewrite_header(path, lambda h: params(h).update(crop_fraction=value))
+    if 0 <= value <= 1:
+        assert load_model(path)["acoustic"].crop_fraction == value
+    else:
+        refused_in_one_line(path)
 
 
 def test_registered_and_unfitted_raises() -> None:

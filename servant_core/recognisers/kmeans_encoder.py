@@ -11,16 +11,16 @@
 4. Multinomial logistic regression over the standardised statistics and encodings gives
    calibrated probabilities; it keeps one weight vector per scene, so a scene taught with one
    window is not starved of centroids (no "one centroid per 8 rows").
-5. Robustness to the microphone: every training window is also seen through random
-   equalisations (a tilt and a bend of the log spectrum), so the head cannot lean on a
-   recording's colouration.
+5. Robustness to the microphone: every training window is also seen through equalisations
+   (a tilt and a bend of the log spectrum, evenly turned, not drawn at random: the model does
+   not swing with a random state), so the head cannot lean on a recording's colouration.
 6. Open set: one K-Means centroid per scene over the standardised descriptors with its own
    spread (`SceneCentroids`); a window farther than the rejection distance from every centroid
    is `UNKNOWN`.
 
-`C` and `augment` are the choice of cross-validation grouped by recording inside the training
-library (`bench/kmeans_encoder_search.py`); the other defaults come from earlier rounds of that
-kind (README, issue 11 section).
+`C`, `augment`, `eq_strength`, `crops`, `crop_fraction`, `n_codewords` and `n_mels` are the
+choice of cross-validation grouped by recording inside the training part of the development
+library (`bench/kmeans_encoder_search.py`; docs/research.md, issue 11); the others are not.
 """
 
 from __future__ import annotations
@@ -64,15 +64,21 @@ def triangle_encoding(frames: np.ndarray, codewords: np.ndarray) -> np.ndarray:
     return active.reshape(n, t, -1).mean(axis=1)
 
 
-def equalised(frames: np.ndarray, rng: np.random.Generator, strength: float) -> np.ndarray:
-    """`frames` through a random equaliser per window: a tilt and a bend of the log spectrum of
-    up to `strength` (log10 units at the band edges), as another microphone would colour it."""
-    bands = frames.shape[-1]
+def eq_curves(bands: int, strength: float, n: int) -> np.ndarray:
+    """(n, bands) equaliser curves in log10 units, each with zero mean (the level is kept): a tilt
+    and a bend of the log spectrum, `strength` at the band edges, their mix turned evenly around
+    the circle. Evenly spaced, not drawn at random: the fitted model does not depend on the
+    draw, which is what made the few-shot figures swing from one random state to the next."""
     x = np.linspace(-1.0, 1.0, bands)
-    tilt = rng.uniform(-strength, strength, (len(frames), 1)) * x
-    bend = rng.uniform(-strength, strength, (len(frames), 1)) * (x**2 - 1.0 / 3.0)
-    curve = (tilt + bend)[:, None, :]
-    return (frames + curve - curve.mean(axis=-1, keepdims=True)).astype(np.float32)
+    angles = np.pi / 4 + 2.0 * np.pi * np.arange(n) / n
+    curves = strength * (np.cos(angles)[:, None] * x + np.sin(angles)[:, None] * (x**2 - 1 / 3))
+    return curves - curves.mean(axis=1, keepdims=True)
+
+
+def equalised(frames: np.ndarray, curve: np.ndarray) -> np.ndarray:
+    """`frames` (…, bands) through one equaliser curve (bands,): how another microphone would
+    colour the same place."""
+    return (frames + curve).astype(np.float32)
 
 
 def softmax_proba(scores: np.ndarray) -> np.ndarray:
@@ -91,15 +97,16 @@ class KMeansEncoderAcousticRecogniser:
         *,
         rate: int = ENCODER_RATE,
         window_seconds: float = 5.0,
-        n_mels: int = 40,
+        n_mels: int = 64,
         frame_seconds: float = 0.046,
         fmin: float = DEFAULT_FMIN,
         fmax: float = DEFAULT_FMAX,
-        n_codewords: int = 64,
+        n_codewords: int = 128,
         n_codebooks: int = 3,
-        C: float = 0.5,
+        C: float = 2.0,
         augment: int = 2,
         crops: int = 4,
+        crop_fraction: float = 0.25,
         eq_strength: float = 0.45,
         max_codebook_frames: int = 20000,
         reject_quantile: float = 0.95,
@@ -117,6 +124,7 @@ class KMeansEncoderAcousticRecogniser:
         self.C = C
         self.augment = augment
         self.crops = crops
+        self.crop_fraction = crop_fraction
         self.eq_strength = eq_strength
         self.max_codebook_frames = max_codebook_frames
         self.reject_quantile = reject_quantile
@@ -139,7 +147,8 @@ class KMeansEncoderAcousticRecogniser:
         X = np.asarray(X, dtype=np.float32)
         scenes_arr = np.asarray(scenes).astype(str)
         rng = np.random.default_rng(self.random_state)
-        views = [X] + [equalised(X, rng, self.eq_strength) for _ in range(self.augment)]
+        curves = eq_curves(X.shape[-1], self.eq_strength, self.augment)
+        views = [X] + [equalised(X, curve) for curve in curves]
         frames = np.concatenate(views)
         flat = frames.reshape(-1, frames.shape[-1])
         sample = flat[rng.choice(len(flat), min(len(flat), self.max_codebook_frames), False)]
@@ -169,11 +178,12 @@ class KMeansEncoderAcousticRecogniser:
         return self
 
     def _crops(self, frames: np.ndarray) -> list[np.ndarray]:
-        """`crops` evenly spaced halves of the windows: with a window or two a scene (a first
-        teach session) the head still sees how a place varies within itself."""
-        half = frames.shape[1] // 2
-        starts = np.linspace(0, frames.shape[1] - half, self.crops).astype(int)
-        return [frames[:, s : s + half] for s in starts]
+        """`crops` evenly spaced parts of the windows, each `crop_fraction` of a window long: with
+        a window or two a scene (a first teach session) the head still sees how a place varies
+        within itself."""
+        length = max(2, int(round(frames.shape[1] * self.crop_fraction)))
+        starts = np.linspace(0, frames.shape[1] - length, self.crops).astype(int)
+        return [frames[:, s : s + length] for s in starts]
 
     def _fit_heads(self) -> None:
         """The logistic head over every stored descriptor; the open set's centroids (one a
