@@ -101,6 +101,8 @@ class Settings:
     audio_device: str | int | None = None  # a sounddevice name or index; None: the default input
     camera: str | int | None = None  # a camera index, a video file or an image pattern
     serial_port: str | None = None
+    # the motion and ambient sensor board's serial port, or a folder of their logs; None: none
+    sensor_port: str | None = None
     protocol: str = "maestro"
     joints: list[Joint] = field(default_factory=default_joints)
     acoustic_window_s: float = 30.0  # the paper: a visual prediction must follow within 30 s
@@ -138,8 +140,10 @@ class Settings:
             value = getattr(self, name)
             if not (value is None or isinstance(value, str) or _is_integer(value)):
                 lines.append(f"{name} must be a name, an index or null, not {value!r}")
-        if not (self.serial_port is None or isinstance(self.serial_port, str)):
-            lines.append(f"serial_port must be a port name or null, not {self.serial_port!r}")
+        for name in ("serial_port", "sensor_port"):
+            value = getattr(self, name)
+            if not (value is None or isinstance(value, str)):
+                lines.append(f"{name} must be a port name or null, not {value!r}")
         for name in ("acoustic_window_s", "confirm_window_s", "picture_interval_s"):
             value = getattr(self, name)
             if not (_is_number(value) and 0 < value <= MAX_WINDOW_S):

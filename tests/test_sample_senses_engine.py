@@ -161,3 +161,20 @@ def test_the_demo_with_the_learned_fusion_decides_every_place_and_says_what_it_l
     assert {scene for scene, _ in decided} == {"Coffee", "Gym", "Street"}, done.stdout
     senses = {s.strip() for _, leaned in decided for s in leaned.split(",")}
     assert senses <= {"audio", "image", "motion", "ambient"} and "motion" in senses
+
+
+def test_the_settings_sensor_board_is_used_by_a_plain_servant_run(sensor_model, tmp_path):
+    """A wearer sets the sensor board once in Settings (here a folder of logs, as a port would
+    be), and `servant run` uses it with no --imu or --ambient; the settings file is the real one
+    of the config dir."""
+    import os
+
+    from servant_core.settings import Settings, save_settings
+
+    write_sensor_library(tmp_path / "walk", seed=9, windows_per_scene=1)
+    save_settings(Settings(sensor_port=str(tmp_path / "walk")))  # the test's own config dir
+    args = ["--model", str(sensor_model), "--no-mic", "--no-camera", "--duration", "16"]
+    done = servant("run", "--headless", *args, env=dict(os.environ))
+    assert done.returncode == 0, done.stderr
+    assert re.findall(r"felt \(motion\) (\w+)", done.stdout)[:3] == ["coffee", "gym", "street"]
+    assert "ambient ok" in done.stdout

@@ -104,6 +104,7 @@ def joints_file(**changes: object) -> str:
         ('{"joints": [{"name": [1]}]}', "joint 1 is malformed"),
         (joints_file(min_angle=True), "min_angle must be finite numbers"),
         ('{"serial_port": ["COM1"]}', "serial_port must be a port name or null"),
+        ('{"sensor_port": 7}', "sensor_port must be a port name or null"),
         ('{"protocol": {"a": 1}}', "protocol .* is unknown"),
         ('{"acoustic_window_s": 1e400}', "acoustic_window_s must be a number of seconds"),
         ('{"confirm_window_s": true}', "confirm_window_s must be a number of seconds"),

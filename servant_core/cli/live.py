@@ -176,9 +176,16 @@ def live_settings(args: argparse.Namespace | None = None) -> LiveSettings:
     default = default_model_file()
     taught = default if default.is_file() else None
     camera = user.camera if user.camera is not None else 0
+    port = user.sensor_port
+    board = {s.stream: port for s in SAMPLE_SENSES.values() if s.stream and port}
     if args is None:
         return LiveSettings(
-            model=taught, model_path=default, microphone=user.audio_device, camera=camera, user=user
+            model=taught,
+            model_path=default,
+            microphone=user.audio_device,
+            camera=camera,
+            user=user,
+            sensors=board,
         )
     changes = {"serial_port": args.port, "protocol": args.protocol}
     user = dataclasses.replace(user, **{k: v for k, v in changes.items() if v is not None})
@@ -191,12 +198,18 @@ def live_settings(args: argparse.Namespace | None = None) -> LiveSettings:
         camera=None if args.no_camera else (args.camera if args.camera is not None else camera),
         user=user,
         policy=args.policy,
-        sensors={
-            s.stream: getattr(args, s.stream)
-            for s in SAMPLE_SENSES.values()
-            if s.stream and getattr(args, s.stream, None) is not None
-        },
+        sensors=_sensors(args, board),
     )
+
+
+def _sensors(args: argparse.Namespace, board: dict[str, str]) -> dict[str, str]:
+    """{stream: port or log} from `--imu`, `--ambient`…; without any, the settings' board."""
+    given = {
+        s.stream: getattr(args, s.stream)
+        for s in SAMPLE_SENSES.values()
+        if s.stream and getattr(args, s.stream, None) is not None
+    }
+    return given or board
 
 
 def run_demo(args: argparse.Namespace) -> int:

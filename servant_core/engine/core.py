@@ -188,6 +188,8 @@ class Engine:
         self._scores: dict[str, dict[str, float]] = {"acoustic": {}, "visual": {}}
         self._scores.update({SENSES[sense].role: {} for sense in self.samples})
         self._unknowns = Unknowns()
+        self.sensor_port: str | None = None  # the settings' board the senses were opened on
+        self._sensor_port_told: str | None = None
 
     # --- subscribers and status -------------------------------------------------------------
 
@@ -531,6 +533,16 @@ class Engine:
         self._emit(state)
         if self._arm.connected_here:
             self.connect_arm(settings.serial_port, settings.protocol, settings.joints)
+        board = getattr(settings, "sensor_port", None)
+        if board != self.sensor_port and board != self._sensor_port_told:
+            self._sensor_port_told = board
+            self._emit(
+                Notice(
+                    self.clock(),
+                    f"sensor board {board or 'none'}: from the next start of Servant (the "
+                    "motion and ambient senses open with the engine)",
+                )
+            )
 
     # --- what the front end asks for ----------------------------------------------------------
 

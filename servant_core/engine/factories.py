@@ -225,6 +225,7 @@ def build_live_engine(
             "learned fusion: the model has no net yet, so the parallel policy decides; Retrain "
             "in the library (l, R) or `servant train --learned-fusion` teaches it"
         )
+    engine.sensor_port = user.sensor_port
     engine.connect_arm(user.serial_port, user.protocol, user.joints)
     learner_file = Path(settings.learner or default_learner_path())
     if settings.learner is not None or learner_file.is_file():

@@ -20,6 +20,7 @@ DEVICE_FIELDS = (
     ("audio_device", "audio input", "sounddevice name or index; empty: the default input"),
     ("camera", "camera", "camera index, video file or image pattern; empty: index 0"),
     ("serial_port", "serial port", "e.g. /dev/ttyACM0; empty: no arm"),
+    ("sensor_port", "sensor board", "motion/ambient: e.g. /dev/ttyUSB0 or a log folder"),
 )
 WINDOW_FIELDS = (
     ("acoustic_window_s", "acoustic window (s)"),
