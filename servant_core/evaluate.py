@@ -14,7 +14,7 @@ from __future__ import annotations
 import inspect
 import math
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -283,8 +283,22 @@ def over_seeds(run: Callable[[int | None], dict[str, Any]], seeds: int) -> dict[
         scene: float(np.mean([r["per_class"][scene] for r in runs]))
         for scene in result["per_class"]
     }
+    averaged(result, runs, SEED_METRICS)
+    result["seeds"] = seeds
+    result["per_seed"] = [
+        {"random_state": seed, **{key: r[key] for key in (*SEED_METRICS, "per_class")}}
+        for seed, r in enumerate(runs)
+    ]
+    return result
+
+
+def averaged(
+    result: dict[str, Any], runs: Sequence[Mapping[str, Any]], keys: Sequence[str]
+) -> None:
+    """Each figure of `keys` in `result` becomes its mean over `runs`, with its spread (std,
+    min, max) under `result["spread"]`."""
     result["spread"] = {}
-    for key in SEED_METRICS:
+    for key in keys:
         values = np.array([r[key] for r in runs])
         result[key] = float(values.mean())
         result["spread"][key] = {
@@ -292,12 +306,6 @@ def over_seeds(run: Callable[[int | None], dict[str, Any]], seeds: int) -> dict[
             "min": float(values.min()),
             "max": float(values.max()),
         }
-    result["seeds"] = seeds
-    result["per_seed"] = [
-        {"random_state": seed, **{key: r[key] for key in (*SEED_METRICS, "per_class")}}
-        for seed, r in enumerate(runs)
-    ]
-    return result
 
 
 def _joined(train: WindowFeatures, test: WindowFeatures) -> WindowFeatures:
@@ -658,15 +666,7 @@ def score_learned(
         result.pop("random_state")
         result["seeds"] = seeds
         result["per_seed"] = runs
-        result["spread"] = {}
-        for key in FUSION_METRICS:
-            values = np.array([r[key] for r in runs])
-            result[key] = float(values.mean())
-            result["spread"][key] = {
-                "std": float(values.std()),
-                "min": float(values.min()),
-                "max": float(values.max()),
-            }
+        averaged(result, runs, FUSION_METRICS)
     return result
 
 

@@ -8,8 +8,10 @@ pulled.
 from __future__ import annotations
 
 import os
+import threading
 import tty
 from pathlib import Path
+from typing import Self
 
 from servant_core.errors import ServantError
 
@@ -54,3 +56,29 @@ class PtyPort:
         ):
             self.link.unlink()
         self.link = None
+
+
+class PtyService:
+    """What the emulators share: a thread serving a `PtyPort` until `stop()`, which closes it
+    (to the host, the device unplugged); a context manager that stops on leaving."""
+
+    def __init__(self) -> None:
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._pty: PtyPort | None = None
+
+    def stop(self) -> None:
+        """Stop serving and close the pty: to the host this is the device unplugged."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+            self._thread = None
+        if self._pty is not None:
+            self._pty.close()
+            self._pty = None
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()

@@ -22,7 +22,7 @@ from servant_core.audio import DEFAULT_WINDOW_SECONDS
 from servant_core.capture.sensors import AMBIENT_RATE, IMU_RATE, format_line
 from servant_core.demo.motion_synth import SEA_LEVEL_HPA, synth_ambient, synth_motion
 from servant_core.errors import ServantError
-from servant_core.pty_port import PtyPort
+from servant_core.pty_port import PtyPort, PtyService
 
 CHUNK_SECONDS = DEFAULT_WINDOW_SECONDS  # synthesised a window at a time, like the demo's sound
 TICK_S = 0.02
@@ -64,7 +64,7 @@ def script_scene(script: Sequence[tuple[str, float]]) -> Callable[[float], str]:
     return scene_at
 
 
-class SensorEmulator:
+class SensorEmulator(PtyService):
     """Streams the lines of `scene_at(t)` on a pty from `start()` on; `inject(data)` slips raw
     bytes (a bad line) into the stream. `lines_between(t0, t1)` is what it sends in that span."""
 
@@ -77,6 +77,7 @@ class SensorEmulator:
         ambient_rate: int = AMBIENT_RATE,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
+        super().__init__()
         self.scene_at = scene_at
         self.seed = seed
         self.rates = {"imu": imu_rate, "ambient": ambient_rate}
@@ -87,9 +88,6 @@ class SensorEmulator:
         self._sent = {"imu": 0, "ambient": 0}
         self._injected: list[bytes] = []
         self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._pty: PtyPort | None = None
         self._t0 = 0.0
 
     def _chunk(self, kind: str, k: int) -> np.ndarray:
@@ -170,19 +168,3 @@ class SensorEmulator:
                     self._write(data)
                 except OSError:
                     return
-
-    def stop(self) -> None:
-        """Stop serving and close the pty: to the host this is the board unplugged."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join()
-            self._thread = None
-        if self._pty is not None:
-            self._pty.close()
-            self._pty = None
-
-    def __enter__(self) -> SensorEmulator:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()

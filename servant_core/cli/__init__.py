@@ -13,9 +13,11 @@ import contextlib
 import importlib
 import json
 import os
+import signal
 import sys
+import threading
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 from servant_core.errors import ServantError
@@ -120,6 +122,22 @@ def run_handler(args: argparse.Namespace) -> int:
             return 2
         except KeyboardInterrupt:
             return 130
+
+
+def serve_until_stopped(
+    stop_serving: Callable[[], None], message: str, seconds: float | None
+) -> int:
+    """Print `message`, then wait for Ctrl-C, SIGTERM or `seconds`; `stop_serving()` at the end
+    (an emulator's command)."""
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        print(message, flush=True)
+        stop.wait(seconds)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        stop_serving()
+    return 0
 
 
 @contextlib.contextmanager

@@ -5,9 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 import re
-import signal
 import sys
-import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -21,7 +19,7 @@ from servant_core.actions.records import (
     label_scores,
     load_records,
 )
-from servant_core.cli import emit
+from servant_core.cli import emit, serve_until_stopped
 from servant_core.cli.options import bounded_int, finite_float
 from servant_core.errors import ServantError
 from servant_core.servo import PROTOCOLS
@@ -222,19 +220,12 @@ def run_query(args: argparse.Namespace) -> int:
 
 def run_emulate(args: argparse.Namespace) -> int:
     emulator, port = start_emulator(args.protocol, link=args.link)
-    stop = threading.Event()
-    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    try:
-        print(
-            f"Emulating a {PROTOCOLS[args.protocol].title} on {port}; connect with "
-            f"`servant servo query --port {port} --protocol {args.protocol}`. Ctrl-C stops.",
-            flush=True,
-        )
-        stop.wait(args.seconds)
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-        emulator.stop()
-    return 0
+    return serve_until_stopped(
+        emulator.stop,
+        f"Emulating a {PROTOCOLS[args.protocol].title} on {port}; connect with "
+        f"`servant servo query --port {port} --protocol {args.protocol}`. Ctrl-C stops.",
+        args.seconds,
+    )
 
 
 # -- teach ---------------------------------------------------------------------------------

@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import signal
-import threading
 
 from servant_core.capture.sensors import AMBIENT_RATE, IMU_RATE
+from servant_core.cli import serve_until_stopped
 from servant_core.cli.options import bounded_int, finite_float
 
 MAX_EMULATE_S = 7 * 24 * 3600.0
@@ -59,16 +58,9 @@ def run_emulate_sensors(args: argparse.Namespace) -> int:
         scene_at, seed=args.seed, imu_rate=args.imu_rate, ambient_rate=args.ambient_rate
     )
     port = emulator.start(args.link)
-    stop = threading.Event()
-    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    try:
-        print(
-            f"Emulating the sensor board on {port} ({args.imu_rate} Hz motion, "
-            f"{args.ambient_rate} Hz ambient); connect with `--imu {port}`. Ctrl-C stops.",
-            flush=True,
-        )
-        stop.wait(args.seconds)
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-        emulator.stop()
-    return 0
+    return serve_until_stopped(
+        emulator.stop,
+        f"Emulating the sensor board on {port} ({args.imu_rate} Hz motion, "
+        f"{args.ambient_rate} Hz ambient); connect with `--imu {port}`. Ctrl-C stops.",
+        args.seconds,
+    )

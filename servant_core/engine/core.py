@@ -42,7 +42,7 @@ from servant_core.capture.source import (
 from servant_core.engine import learning
 from servant_core.engine.arm import ArmControl, PoseFor
 from servant_core.engine.bus import EventBus, Subscriber
-from servant_core.engine.learning import Kept, Unknowns, progress_part
+from servant_core.engine.learning import Kept, Unknowns
 from servant_core.engine.loop import SPECTRUM_FPS, SPECTRUM_SIZE, Feeling, Hearing, Sight
 from servant_core.errors import ServantError
 from servant_core.events import (
@@ -610,50 +610,33 @@ class Engine:
         `fresh_methods` method. Unreadable files are reported and skipped. A sense that cannot
         be trained (e.g. pictures of one scene only) is reported and keeps its recogniser while
         the other is retrained; if neither can be, the first reason is raised. `on_progress(done,
-        total)` is called after each file read, recordings then pictures, on this thread."""
+        total)` is called after each file read, recordings, pictures, then logs, on this
+        thread."""
         if not isinstance(library, SceneLibrary):
             library = SceneLibrary.scan(library)
         with self._update_lock:
             with self._lock:
-                acoustic, visual = self.acoustic, self.visual
-            new_acoustic = new_visual = None
-            failures: list[ServantError] = []
-            heard, seen = len(library.recordings), len(library.pictures)
-            total = heard + seen + sum(len(files) for files in library.samples.values())
-            try:
-                new_acoustic = learning.refit_audio(
-                    library,
-                    learning.copy_or_fresh(acoustic, "audio", self.fresh_methods["audio"]),
-                    self.window_seconds,
-                    self._report_error,
-                    progress_part(on_progress, 0, total),
-                )
-            except ServantError as error:
-                failures.append(ServantError(f"retrain (sound): {error}"))
-            try:
-                new_visual = learning.refit_pictures(
-                    library,
-                    learning.copy_or_fresh(visual, "image", self.fresh_methods["image"]),
-                    self._report_error,
-                    progress_part(on_progress, heard, total),
-                )
-            except ServantError as error:
-                failures.append(ServantError(f"retrain (pictures): {error}"))
-            new_samples = self._refit_samples(
-                library, failures, on_progress, offset=heard + seen, total=total
+                current = self._recognisers_by_sense()
+            fitted, failures = learning.retrained(
+                library,
+                current,
+                self.fresh_methods,
+                self.window_seconds,
+                self._report_error,
+                on_progress,
             )
-            if new_acoustic is None and new_visual is None and not new_samples:
+            if not fitted:
                 if failures:
                     raise failures[0]
                 return
             for failure in failures:
                 self._error(str(failure))
             with self._lock:
-                if new_acoustic is not None:
-                    self.acoustic = new_acoustic
+                if "audio" in fitted:
+                    self.acoustic = fitted.pop("audio")
                     self._forget_windows()
-                self.visual = new_visual or self.visual
-                self.sample_recognisers.update(new_samples)
+                self.visual = fitted.pop("image", self.visual)
+                self.sample_recognisers.update(fitted)
                 self.retrain_needed = False
             self._relearn_fusion(library)
             self._save_models()
@@ -679,38 +662,6 @@ class Engine:
     def _recognisers_by_sense(self) -> dict[str, Recogniser]:
         found = {"audio": self.acoustic, "image": self.visual, **self.sample_recognisers}
         return {sense: model for sense, model in found.items() if model is not None}
-
-    def _refit_samples(
-        self,
-        library: SceneLibrary,
-        failures: list[ServantError],
-        on_progress: Callable[[int, int], None] | None,
-        offset: int,
-        total: int,
-    ) -> dict[str, Recogniser]:
-        """Refitted copies (or fresh ones) for each sample sense with logs in the library."""
-        fitted: dict[str, Recogniser] = {}
-        for sense, files in library.samples.items():
-            with self._lock:
-                current = self.sample_recognisers.get(sense)
-            stream = SAMPLE_SENSES[sense].stream
-            assert stream is not None
-            try:
-                model = learning.refit_samples(
-                    files,
-                    stream,
-                    learning.copy_or_fresh(current, sense, self.fresh_methods[sense]),
-                    self.window_seconds,
-                    self._report_error,
-                    progress_part(on_progress, offset, total),
-                )
-            except ServantError as error:
-                failures.append(ServantError(f"retrain ({sense}): {error}"))
-                model = None
-            if model is not None:
-                fitted[sense] = model
-            offset += len(files)
-        return fitted
 
     def _report_error(self, error: ServantError) -> None:
         self._error(str(error))

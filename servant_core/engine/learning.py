@@ -92,6 +92,50 @@ def copy_or_fresh(recogniser: Recogniser | None, sense: str, method: str) -> Any
     return make_recogniser(sense, method)
 
 
+def retrained(
+    library: SceneLibrary,
+    current: Mapping[str, Recogniser],
+    fresh_methods: Mapping[str, str],
+    window_seconds: float,
+    on_error: OnError,
+    on_progress: OnProgress | None = None,
+) -> tuple[dict[str, Recogniser], list[ServantError]]:
+    """({sense: refitted recogniser}, why others could not be) for each sense with files in
+    the library: a copy of its `current` recogniser refitted, or a new one of its fresh method.
+    Sound first, then pictures, then each sample sense; `on_progress` runs over them all."""
+    parts: list[tuple[str, Sequence[Any]]] = [
+        ("audio", library.recordings),
+        ("image", library.pictures),
+        *library.samples.items(),
+    ]
+    total, offset = sum(len(files) for _, files in parts), 0
+    fitted: dict[str, Recogniser] = {}
+    failures: list[ServantError] = []
+    for sense, files in parts:
+        if not files:
+            continue
+        model = copy_or_fresh(current.get(sense), sense, fresh_methods[sense])
+        progress = progress_part(on_progress, offset, total)
+        offset += len(files)
+        try:
+            if sense == "audio":
+                new = refit_audio(library, model, window_seconds, on_error, progress)
+            elif sense == "image":
+                new = refit_pictures(library, model, on_error, progress)
+            else:
+                stream = SAMPLE_SENSES[sense].stream or sense
+                new = refit_samples(files, stream, model, window_seconds, on_error, progress)
+        except ServantError as error:
+            failures.append(ServantError(f"retrain ({RETRAIN_WORDS.get(sense, sense)}): {error}"))
+            continue
+        if new is not None:
+            fitted[sense] = new
+    return fitted, failures
+
+
+RETRAIN_WORDS = {"audio": "sound", "image": "pictures"}
+
+
 def refit_audio(
     library: SceneLibrary,
     model: Any,

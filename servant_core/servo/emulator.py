@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from servant_core.errors import ServantError
-from servant_core.pty_port import PtyPort
+from servant_core.pty_port import PtyPort, PtyService
 from servant_core.servo import PROTOCOLS, firmata, maestro, ssc32
 
 FAULTS = (None, "silent", "garbage")
@@ -59,7 +59,7 @@ class Channel:
         return self.pulse != self.target
 
 
-class ServoEmulator:
+class ServoEmulator(PtyService):
     """The controller's behaviour: `feed(request bytes) -> reply bytes`, positions by its clock.
 
     `fault` makes it misbehave on purpose: "silent" answers nothing, "garbage" answers nonsense.
@@ -70,6 +70,7 @@ class ServoEmulator:
     def __init__(
         self, protocol: str, clock: Callable[[], float] = time.monotonic, fault: str | None = None
     ) -> None:
+        super().__init__()
         if protocol not in PROTOCOLS:
             raise ServantError(
                 f"servo protocol {protocol!r} is unknown; use one of {', '.join(PROTOCOLS)}"
@@ -87,9 +88,6 @@ class ServoEmulator:
         self._history: deque[tuple[float, int, float]] = deque(maxlen=HISTORY)
         self._pending = b""
         self._lock = threading.Lock()
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
-        self._pty: PtyPort | None = None
         self.port: str | None = None
 
     # -- behaviour ------------------------------------------------------------------------
@@ -328,22 +326,6 @@ class ServoEmulator:
     def serving(self) -> bool:
         """Whether its pty is open: False once stopped (unplugged)."""
         return self._pty is not None
-
-    def stop(self) -> None:
-        """Stop serving and close the pty: to the host this is the controller unplugged."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join()
-            self._thread = None
-        if self._pty is not None:
-            self._pty.close()
-            self._pty = None
-
-    def __enter__(self) -> ServoEmulator:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
 
 
 def start_emulator(
