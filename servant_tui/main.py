@@ -19,6 +19,7 @@ from servant_core.demo.space import throwaway_space
 from servant_core.engine import build_demo_engine
 from servant_core.errors import ServantError
 from servant_core.progress import Progress
+from servant_tui.memtrace import start_from_environment as start_memtrace
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -41,6 +42,7 @@ def run_tui(engine_factory: Callable[[], Any], mode: str) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    start_memtrace()  # a developer option, off unless SERVANT_MEMTRACE is set
     headless = getattr(args, "headless", False)
     if args.command is None or (args.command == "run" and not headless and not args.list_devices):
         return run_tui(lambda: build_run_engine(args if args.command else None), "live")
