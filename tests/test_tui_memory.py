@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 from rich.style import Style
 from textual.app import App
 
@@ -61,3 +62,41 @@ def test_swatches_are_drawn_in_sixteen_levels_a_channel():
         for rgb in np.random.default_rng(1).integers(0, 256, (2000, 3))
     }
     assert all(v % 17 == 0 for rgb in levels for v in rgb)
+
+
+RELEASE_SCRIPT = """
+import numpy as np
+from pathlib import Path
+from servant_tui.heap import release_free_heap
+
+def rss_mb():
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+
+big = np.ones(2**21)  # 16 MiB, mapped on its own; freeing it raises glibc's threshold to that
+del big
+arrays, kept = [], []
+for _ in range(6):  # 6 x 8 MiB now from the heap, each followed by a small array that stays
+    arrays.append(np.ones(2**20))
+    kept.append(np.ones(100))
+del arrays
+before = rss_mb()
+release_free_heap()
+print(before - rss_mb())
+"""
+
+
+def test_release_free_heap_gives_the_heaps_free_memory_back():
+    """What a retrain leaves behind: large arrays freed inside the heap stay resident until the
+    heap is trimmed (glibc; elsewhere `release_free_heap` does nothing and this is skipped)."""
+    import ctypes.util
+    import subprocess
+    import sys
+
+    if "libc.so.6" not in (ctypes.util.find_library("c") or ""):
+        pytest.skip("not glibc")
+    result = subprocess.run(
+        [sys.executable, "-c", RELEASE_SCRIPT], capture_output=True, text=True, check=True
+    )
+    assert float(result.stdout) > 8  # MB given back (of 48 freed; 0 without the trim)
