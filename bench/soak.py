@@ -5,7 +5,9 @@ the recognisers from the library screen (`l`, then `R`) at `--retrain-at` minute
 samples, the growth per hour after `--warmup` minutes (least-squares slope) and the peak.
 Targets (issue 13): at most 5 MB/h after the first 10 minutes, at most 250 MB after a retrain.
 
-Run from the repository root: `python bench/soak.py --minutes 60 --mode tui --retrain-at 15`.
+Run from the repository root: `python bench/soak.py --minutes 60 --mode tui --retrain-at 15`
+(a retrain adds memory: measure the growth in a run without one). What grows, and why: run the
+TUI with `SERVANT_MEMTRACE=FILE` (see `servant_tui/memtrace.py`).
 """
 
 from __future__ import annotations
