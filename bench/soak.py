@@ -72,6 +72,9 @@ def main() -> int:
     retrained_at: float | None = None
     retrain_done_at: float | None = None
     with tempfile.TemporaryDirectory() as scratch:
+        # A tmux server of our own (its socket in `scratch`): one shared with other programs
+        # may be killed under a long run, and would not hand the new session our environment.
+        os.environ["TMUX_TMPDIR"] = scratch
         env = {**os.environ, "SERVANT_DATA_DIR": scratch, "SERVANT_CONFIG_DIR": scratch}
         runner = in_tmux("demo", env) if args.mode == "tui" else headless(env)
         with runner as handle:
