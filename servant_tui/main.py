@@ -19,6 +19,8 @@ from servant_core.demo.space import throwaway_space
 from servant_core.engine import build_demo_engine
 from servant_core.errors import ServantError
 from servant_core.progress import Progress
+from servant_tui.heap import release_free_heap
+from servant_tui.memtrace import start_from_environment as start_memtrace
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -34,6 +36,7 @@ def run_tui(engine_factory: Callable[[], Any], mode: str) -> int:
     except ServantError as error:
         print(f"servant: error: {error}", file=sys.stderr)
         return 2
+    release_free_heap()  # the demo's engine trained its recognisers: most of that is free now
     app = ServantApp(engine, mode=mode)
     app.run()
     return app.return_code or 0
@@ -41,6 +44,7 @@ def run_tui(engine_factory: Callable[[], Any], mode: str) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    start_memtrace()  # a developer option, off unless SERVANT_MEMTRACE is set
     headless = getattr(args, "headless", False)
     if args.command is None or (args.command == "run" and not headless and not args.list_devices):
         return run_tui(lambda: build_run_engine(args if args.command else None), "live")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from servant_core.capture.source import ManualClock
 from servant_core.demo.audio_synth import DEMO_RATE
 from servant_core.demo.scenes import (
     SCENES,
@@ -159,3 +160,28 @@ def test_the_demos_start_up_reports_its_progress():
     seen: list[tuple[int, int]] = []
     train_demo_recognisers(seed=0, paper=False, on_progress=lambda d, t: seen.append((d, t)))
     assert seen == [(k, len(SCENES) + 2) for k in range(1, len(SCENES) + 3)]
+
+
+@pytest.mark.parametrize("started_after", [0.0, 3.3, 17.0])
+def test_paper_demo_detects_every_scene_in_every_loop(started_after):
+    """`servant demo --paper`: each place is detected again on every pass of the walk, with the
+    paper's 30 s / 20 s rule. At real speed the engine's clock starts when the demo is built, and
+    the sound only when the engine starts: training and the TUI's start lie between (about 15 s).
+    A camera that followed the clock from then on ran ahead of the sound, and the paper's rule
+    (which looks only after it hears) lost the café after the first loop. A manual clock that
+    starts at `started_after` stands for that time, deterministically."""
+    clock = ManualClock(started_after)
+    engine = build_demo_engine(seed=0, clock=clock, realtime=False, paper=True, arm=False)
+    events: list = []
+    engine.subscribe(events.append)
+    engine.run_until(started_after + 3 * walk_length())
+    engine.stop()
+    for loop in range(3):
+        found = {
+            e.scene
+            for e in events
+            if isinstance(e, Decision)
+            and e.scene
+            and loop * walk_length() <= e.t - started_after < (loop + 1) * walk_length()
+        }
+        assert found == set(SCENES), (loop, found)

@@ -183,10 +183,16 @@ def demo_audio(seed: int = 0, *, realtime: bool = True, clock=None) -> PacedAudi
 
 
 class DemoCamera:
-    """A frame source showing the walk's place at the engine's time `clock()`.
+    """A frame source showing the walk's place, `CAMERA_LAG_S` behind its sound.
 
-    A picture depends only on the seed and the time (to 0.1 s), so a run on a `ManualClock` shows
-    the same pictures every time.
+    The walk begins when the camera is first opened, with the sound: the engine opens both when
+    it starts. Its clock (`clock()`, the engine's) began earlier, when the demo was built: the
+    training and a front end's start-up lie between, ~15 s at real speed, and a camera on the
+    clock's own time would run that far ahead of the sound. The sequential rule (hear, then look
+    for 30 s) then judged each place on pictures of the next, and lost whole places.
+
+    A picture depends only on the seed and the walk's time (to 0.1 s), so a run on a
+    `ManualClock` shows the same pictures every time.
     """
 
     def __init__(
@@ -196,12 +202,16 @@ class DemoCamera:
         self.clock = clock
         self.seed = seed
         self.walk = walk
+        self.began_at: float | None = None  # the clock's time when the walk began
 
     def open(self) -> None:
-        pass
+        if self.began_at is None:  # a reopened camera goes on with the same walk
+            self.began_at = self.clock()
 
     def read(self) -> np.ndarray:
-        t = self.clock()
+        if self.began_at is None:
+            self.began_at = self.clock()
+        t = self.clock() - self.began_at
         scene = (
             segment_at(t - CAMERA_LAG_S, self.walk).sight
             if t >= CAMERA_LAG_S

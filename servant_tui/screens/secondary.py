@@ -17,6 +17,7 @@ from textual.binding import Binding
 from textual.worker import Worker, WorkerState
 
 from servant_core.library import SceneLibrary
+from servant_tui.heap import release_free_heap
 from servant_tui.widgets.progress import OnProgress
 
 # The app's help and quit, listed again so a screen's footer shows them before the app's other
@@ -97,6 +98,9 @@ def with_progress(
 ) -> Any:
     """`job(library, **options)` reporting its progress: through its own `on_progress` when it
     takes one, else by counting the files it walks (`walked_library`)."""
-    if takes_progress(job):
-        return job(library, on_progress=on_progress, **options)
-    return job(walked_library(library, on_progress, pictures), **options)
+    try:
+        if takes_progress(job):
+            return job(library, on_progress=on_progress, **options)
+        return job(walked_library(library, on_progress, pictures), **options)
+    finally:
+        release_free_heap()  # a retrain or an evaluation frees most of what it took

@@ -4,17 +4,31 @@ palette they matched."""
 from __future__ import annotations
 
 import numpy as np
+from rich.color import Color
 from rich.console import Group
+from rich.style import Style
 from rich.table import Table
 from rich.text import Text
 from textual.widgets import Static
 
 from servant_core.events import Palette
 
+# Swatches are drawn in 16 levels a channel (4,096 colours), and with styles built here, not parsed
+# from markup. Each distinct style is kept in process-wide caches of Rich and Textual (parsing,
+# combining, filtering, ANSI codes; 1,024 to 4,096 entries each); a camera gives three colours
+# never seen before with every picture, so exact colours filled those caches for most of an hour
+# (~+8 MB/h in `bench/soak.py`). The demo's pictures now come in a couple of hundred swatch colours.
+LEVEL = 17  # 255 / 15
+
+
+def swatch_colour(rgb: np.ndarray) -> Color:
+    """The colour a swatch is drawn in: each channel rounded to the nearest of 16 levels."""
+    r, g, b = (int(round(int(v) / LEVEL)) * LEVEL for v in rgb)
+    return Color.from_rgb(r, g, b)
+
 
 def swatch(rgb: np.ndarray, width: int = 4) -> Text:
-    r, g, b = (int(v) for v in rgb)
-    return Text(" " * width, style=f"on rgb({r},{g},{b})")
+    return Text(" " * width, style=Style(bgcolor=swatch_colour(rgb)))
 
 
 def hex_colour(rgb: np.ndarray) -> str:
