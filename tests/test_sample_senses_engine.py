@@ -178,3 +178,24 @@ def test_the_settings_sensor_board_is_used_by_a_plain_servant_run(sensor_model, 
     assert done.returncode == 0, done.stderr
     assert re.findall(r"felt \(motion\) (\w+)", done.stdout)[:3] == ["coffee", "gym", "street"]
     assert "ambient ok" in done.stdout
+
+
+def test_the_demos_sensor_board_starts_with_the_walk_not_when_the_demo_is_built():
+    """The demo's training and the app's start-up lie between building the engine and starting
+    it; a board emulated from the build on ran that far ahead of the sound. It starts when the
+    engine opens it, so the first window's motion is the café's, where the walk begins."""
+    from servant_core.engine import build_demo_engine
+
+    engine = build_demo_engine(seed=0, arm=False)
+    board = engine.samples["motion"].demo_board
+    assert board.emulator.port is None  # nothing streams yet
+    time.sleep(2.0)
+    said: list = []
+    engine.subscribe(lambda e: said.append(e) if isinstance(e, SensePrediction) else None)
+    with engine:
+        deadline = time.monotonic() + 30
+        while not [e for e in said if e.sense == "motion"]:
+            assert time.monotonic() < deadline
+            time.sleep(0.1)
+    assert board.emulator.port is not None
+    assert [e for e in said if e.sense == "motion"][0].scene == "coffee"

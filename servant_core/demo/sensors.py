@@ -11,6 +11,7 @@ heard — even while the camera still shows the café.
 from __future__ import annotations
 
 import itertools
+import threading
 from collections.abc import Callable, Iterator
 
 import numpy as np
@@ -76,6 +77,57 @@ def demo_sensor_sources(
             for sense in SYNTH
         }
         return sources, None
-    emulator = SensorEmulator(script_scene(walk_script()), seed=seed)
-    board = SensorBoard(emulator.start())
-    return {sense: board.source(STREAM[sense]) for sense in SYNTH}, emulator.stop
+    board = DemoBoard(seed)
+    return {sense: board.source(STREAM[sense]) for sense in SYNTH}, board.stop
+
+
+class DemoBoard:
+    """The emulated sensor board, started when the engine first opens one of its streams: the
+    walk's sound and pictures start then too, so the wearer moves with what is heard and seen
+    (started earlier, it ran ahead by the demo's training and start-up time)."""
+
+    def __init__(self, seed: int) -> None:
+        self.emulator = SensorEmulator(script_scene(walk_script()), seed=seed)
+        self.board: SensorBoard | None = None
+        self._lock = threading.Lock()
+
+    def source(self, stream: str) -> DemoStream:
+        return DemoStream(self, stream)
+
+    def started(self) -> SensorBoard:
+        with self._lock:
+            if self.board is None:
+                self.board = SensorBoard(self.emulator.start())
+            return self.board
+
+    def stop(self) -> None:
+        self.emulator.stop()
+
+
+class DemoStream:
+    """One stream of the `DemoBoard`, as a `SampleSource` (a real `SerialSamples` once open)."""
+
+    def __init__(self, board: DemoBoard, stream: str) -> None:
+        self.demo_board = board
+        self.stream = stream
+        self.name = f"demo {stream} sensor"
+        self.rate = RATES[stream]
+        self.channels = CHANNELS[stream]
+        self.live = True
+        self._serial: SampleSource | None = None
+
+    def open(self) -> None:
+        self._serial = self.demo_board.started().source(self.stream)
+        self._serial.open()
+        self.name = self._serial.name
+
+    def read(self, timeout: float) -> np.ndarray | None:
+        return self._serial.read(timeout) if self._serial is not None else None
+
+    @property
+    def exhausted(self) -> bool:
+        return False
+
+    def close(self) -> None:
+        if self._serial is not None:
+            self._serial.close()
