@@ -10,6 +10,7 @@ replay goes on with the next.
 from __future__ import annotations
 
 import threading
+from collections import deque
 from collections.abc import Callable
 
 import numpy as np
@@ -236,7 +237,8 @@ class Feeling:
         self.reopen_seconds = reopen_seconds
         self.ok = False
         self._rows: list[np.ndarray] = []  # blocks not yet cut into a window
-        self._kept: list[np.ndarray] = []  # the last RING_SECONDS of blocks, for recording
+        self._kept: deque[np.ndarray] = deque()  # the last RING_SECONDS of blocks, for recording
+        self._kept_rows = 0
         self._arrived = threading.Condition()
         self._total = 0
         self._retry_at = 0.0
@@ -312,10 +314,11 @@ class Feeling:
     def _keep(self, block: np.ndarray) -> None:
         with self._arrived:
             self._kept.append(block)
+            self._kept_rows += len(block)
             self._total += len(block)
             limit = int(RING_SECONDS * self.source.rate)
-            while sum(len(b) for b in self._kept) - len(self._kept[0]) >= limit:
-                self._kept.pop(0)
+            while self._kept_rows - len(self._kept[0]) >= limit:
+                self._kept_rows -= len(self._kept.popleft())
             self._arrived.notify_all()
 
     def record(self, seconds: float, timeout: float | None) -> np.ndarray:
