@@ -16,8 +16,7 @@ from pathlib import Path
 import numpy as np
 from sklearn.model_selection import StratifiedGroupKFold
 
-from servant_core.audio import DEFAULT_WINDOW_SECONDS
-from servant_core.capture.sample_files import SUFFIXES, read_samples
+from servant_core.capture.sample_files import SUFFIXES, cut_sample_windows, read_samples
 from servant_core.demo.motion_synth import SCENE_AMBIENT, SCENE_MOTION, synth_ambient, synth_motion
 from servant_core.errors import ServantError
 from servant_core.recognisers import UNKNOWN, make_recogniser
@@ -42,14 +41,6 @@ def score(truth: Sequence[str] | np.ndarray, predicted: Sequence[str] | np.ndarr
     named = predicted_arr != UNKNOWN
     precision = float(np.mean(predicted_arr[named] == truth_arr[named])) if named.any() else 0.0
     return SenseScore(float(np.mean(recalls)), float(np.mean(named)), precision, len(truth_arr))
-
-
-def cut_sample_windows(
-    samples: np.ndarray, rate: int, seconds: float = DEFAULT_WINDOW_SECONDS
-) -> list[np.ndarray]:
-    """Consecutive whole windows of `seconds` of (n, channels) samples; the rest is dropped."""
-    length = int(round(rate * seconds))
-    return [samples[i : i + length] for i in range(0, len(samples) - length + 1, length)]
 
 
 def new_recogniser(sense: str, seed: int) -> SensorCentroidRecogniser:

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from servant_core.audio import open_regular_file, os_reason
+from servant_core.audio import DEFAULT_WINDOW_SECONDS, open_regular_file, os_reason
 from servant_core.capture.replay import Clip, PacedAudio
 from servant_core.capture.sensors import CHANNELS, RATES
 from servant_core.capture.source import ManualClock
@@ -193,6 +193,14 @@ def read_samples(path: str | Path, kind: str, rate: int | None = None) -> np.nda
     if not pieces:
         raise ServantError(f"{path}: its readings span less than one sample; record a longer log")
     return np.concatenate(pieces)
+
+
+def cut_sample_windows(
+    samples: np.ndarray, rate: int, seconds: float = DEFAULT_WINDOW_SECONDS
+) -> list[np.ndarray]:
+    """Consecutive whole windows of `seconds` of (n, channels) samples; the rest is dropped."""
+    length = int(round(rate * seconds))
+    return [samples[i : i + length] for i in range(0, len(samples) - length + 1, length)]
 
 
 def write_sample_csv(

@@ -23,10 +23,9 @@ import cv2
 import numpy as np
 
 from servant_core.audio import DEFAULT_RATE, resample, write_wav
-from servant_core.capture.sample_files import read_samples
+from servant_core.capture.sample_files import cut_sample_windows, read_samples
 from servant_core.capture.sensors import RATES
 from servant_core.errors import ServantError
-from servant_core.evaluate_motion import cut_sample_windows
 from servant_core.fusion.learned import FusionNet, SenseOpinions
 from servant_core.fusion.learning import (
     DEFAULT_FOLDS,
