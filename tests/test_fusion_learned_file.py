@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from servant_core.errors import ServantError
-from servant_core.fusion.learned import FusionNet
+from servant_core.fusion.learned import FLAGS, FusionNet
 from servant_core.modelfile import load_model, load_model_and_fusion, save_model
 from servant_core.storage import atomic_save_npz
 from tests.test_fusion_learned import said
@@ -29,7 +29,7 @@ def test_round_trip_keeps_the_net_and_the_recognisers(tmp_path, net):
     path = saved(tmp_path, net)
     recognisers, loaded = load_model_and_fusion(path)
     assert set(recognisers) == {"visual"} and set(load_model(path)) == {"visual"}
-    X = np.random.default_rng(1).random((5, 2 * (3 + 2)))
+    X = np.random.default_rng(1).random((5, 2 * (3 + FLAGS)))
     assert np.array_equal(loaded.predict_proba(X), net.predict_proba(X))
     assert loaded.threshold_ == net.threshold_ and loaded.senses_ == ["audio", "image"]
     with np.load(path, allow_pickle=False) as npz:
