@@ -65,7 +65,7 @@ def scene_video(scene: str, path: Path, frames: int = 20) -> Path:
     return path
 
 
-def teach(tmp_path: Path) -> Path:
+def teach(tmp_path: Path, *train_options: str) -> Path:
     """What a wearer has after teaching coffee and street: a model, teach records and the action
     learner in the data dir (as `servant train` and teach mode leave them)."""
     library = tmp_path / "library"
@@ -77,7 +77,7 @@ def teach(tmp_path: Path) -> Path:
             folder.rmdir()
     model = tmp_path / "model.npz"
     argv = ["train", str(library), "-o", str(model), "--audio-method", "codebook"]
-    assert cli_main([*argv, "--image-method", "bovw"]) == 0
+    assert cli_main([*argv, "--image-method", "bovw", *train_options]) == 0
     records = [TeachRecord(s, label_scores(s, SCENES), POSES[s], time.time()) for s in SCENES]
     ActionLearner(max_iter=3000).fit(records).save()  # the default path, in the data dir
     return model
@@ -111,6 +111,33 @@ def test_servant_run_headless_moves_the_arm_to_the_taught_pose(
     assert result.returncode == 0, result.stderr
     assert "StreetScene detected" in result.stdout, result.stdout
     assert "arm armed" in result.stdout
+    for joint, angle in POSES["street"].items():
+        channel = next(j.channel for j in default_joints() if j.name == joint)
+        assert emu.pulse(channel) == pytest.approx(expected_pulse(joint, angle), abs=8.0), joint
+
+
+def test_the_learned_fusion_moves_the_arm_on_the_live_devices(
+    tmp_path,
+    virtual_mic,
+    emulator,  # noqa: F811
+):
+    """`servant run --headless --policy learned` with a model trained `--learned-fusion`: the
+    net decides from the microphone and the camera, says what it leaned on, and the arm takes
+    the street's pose."""
+    emu, port = emulator
+    model = teach(tmp_path, "--learned-fusion")
+    video = scene_video("street", tmp_path / "street.avi")
+    player = play(scene_sound("street", tmp_path / "street.wav"))
+    try:
+        result = servant(
+            *["run", "--headless", "--model", str(model), "--port", port, "--arm"],
+            *["--camera", str(video), "--duration", "20", "--policy", "learned"],
+        )
+    finally:
+        player.kill()
+    assert result.returncode == 0, result.stderr
+    assert "StreetScene detected" in result.stdout, result.stdout
+    assert "leaned on" in result.stdout and "CoffeeScene detected" not in result.stdout
     for joint, angle in POSES["street"].items():
         channel = next(j.channel for j in default_joints() if j.name == joint)
         assert emu.pulse(channel) == pytest.approx(expected_pulse(joint, angle), abs=8.0), joint
