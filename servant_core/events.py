@@ -108,7 +108,7 @@ class UnknownScene:
     """The engine heard or saw a place it does not know, and asks the user to label it."""
 
     t: float
-    sense: str  # "audio" | "image"
+    sense: str  # "audio", "image", or a sample sense ("motion", "ambient")
     nearest_scene: str | None
     window_id: str  # a handle the engine accepts back with the user's label
 

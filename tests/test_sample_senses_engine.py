@@ -20,7 +20,7 @@ from servant_core.capture.source import ManualClock
 from servant_core.demo.motion_synth import write_sensor_library
 from servant_core.engine import Engine
 from servant_core.errors import ServantError
-from servant_core.events import DeviceStatus, SensePrediction, SensorFrame
+from servant_core.events import DeviceStatus, SensePrediction, SensorFrame, UnknownScene
 from servant_core.library import SceneLibrary
 from servant_core.modelfile import load_model
 from tests.conftest import REPO, servant
@@ -199,3 +199,42 @@ def test_the_demos_sensor_board_starts_with_the_walk_not_when_the_demo_is_built(
             time.sleep(0.1)
     assert board.emulator.port is not None
     assert [e for e in said if e.sense == "motion"][0].scene == "coffee"
+
+
+def test_an_unknown_motion_window_is_asked_about_labelled_and_folded_in(tmp_path):
+    """A sample sense meets a place it was not taught: the engine asks (`UnknownScene`, sense
+    motion), the label writes the window into the library as a log, and the motion recogniser
+    knows the place from then on (folded in, saved with the model). Before, only sound and
+    pictures were asked about; a new place felt was never learned."""
+    root = write_sensor_library(tmp_path / "library", seed=2, windows_per_scene=8)
+    for log in (root / "gym").iterdir():
+        log.unlink()  # taught the café and the street only
+    library = SceneLibrary.scan(root)
+    model_path = tmp_path / "model.npz"
+    taught = Engine(model_path=model_path)
+    taught.retrain(library)
+    gym = write_sensor_library(tmp_path / "new", seed=8, windows_per_scene=2)
+    clock = ManualClock()
+    replay = replay_sample_files(
+        sorted((gym / "gym").glob("*.imu.csv")), "imu", realtime=False, clock=clock
+    )
+    engine = Engine(
+        samples={"motion": replay},
+        sample_recognisers={"motion": taught.sample_recognisers["motion"]},
+        clock=clock,
+        model_path=model_path,
+        library_root=root,
+    )
+    events: list = []
+    engine.subscribe(events.append)
+    engine.run_until(6.0)  # the first gym window
+    [asked] = [e for e in events if isinstance(e, UnknownScene)]
+    assert asked.sense == "motion" and asked.window_id.startswith("motion-")
+    written = engine.label_unknown(asked.window_id, "gym")
+    assert written.parent == root / "gym" and written.name.endswith(".imu.csv")
+    assert written in [f.path for f in SceneLibrary.scan(root).samples["motion"]]  # read as a log
+    events.clear()
+    engine.run_until(1e9)  # the second gym window, never heard before
+    felt = [e.scene for e in events if isinstance(e, SensePrediction)]
+    assert felt == ["gym"], events
+    assert "gym" in load_model(model_path)["motion"].scenes_

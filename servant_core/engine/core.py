@@ -402,6 +402,8 @@ class Engine:
             self._scores[SENSES[sense].role] = scores
         unit = recogniser.confidence_unit
         self._emit(SensePrediction(t, sense, scene if known else None, confidence, scores, unit))
+        if not known:
+            self._ask_label(Kept(sense, rows, int(getattr(recogniser, "rate", rate))), scores, t)
         with self._lock:
             events = self._judged(sense, scene if known else None, confidence, t, scores)
         self._handle(events)
@@ -672,7 +674,8 @@ class Engine:
         self._emit(UnknownScene(t, kept.sense, nearest, window_id))
 
     def label_unknown(self, window_id: str, scene: str) -> Path:
-        """Give the scene the user named to an unknown window or picture (from `UnknownScene`).
+        """Give the scene the user named to an unknown window, picture or sample sense's window
+        (from `UnknownScene`).
 
         It is written into the library (`library_root/<scene>/`, atomically), then folded into a
         copy of the recogniser that replaces it, if it has `fold_in(X, scenes)`; otherwise
@@ -685,7 +688,7 @@ class Engine:
         path = learning.write_labelled(root, scene, window_id, kept)
         with self._update_lock:
             with self._lock:
-                recogniser = self.acoustic if kept.sense == "audio" else self.visual
+                recogniser = self._recognisers_by_sense().get(kept.sense)
                 if recogniser is None or not hasattr(recogniser, "fold_in"):
                     self.retrain_needed = True
                     return path
@@ -694,8 +697,10 @@ class Engine:
                 if kept.sense == "audio":
                     self.acoustic = model
                     self._forget_windows()
-                else:
+                elif kept.sense == "image":
                     self.visual = model
+                else:
+                    self.sample_recognisers[kept.sense] = model
             self._save_models()
         return path
 

@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from servant_core.audio import DEFAULT_RATE, resample, write_wav
-from servant_core.capture.sample_files import cut_sample_windows, read_samples
+from servant_core.capture.sample_files import cut_sample_windows, read_samples, write_sample_csv
 from servant_core.capture.sensors import RATES
 from servant_core.errors import ServantError
 from servant_core.fusion.learned import FusionNet, SenseOpinions
@@ -39,7 +39,7 @@ from servant_core.fusion.learning import (
 from servant_core.library import SampleFile, SceneLibrary, featurize_recordings, read_pictures
 from servant_core.modelfile import save_model
 from servant_core.recognisers import Recogniser, make_recogniser
-from servant_core.senses import SAMPLE_SENSES
+from servant_core.senses import SAMPLE_SENSES, SENSES
 from servant_core.storage import atomic_write_bytes
 
 UNKNOWN_KEPT = 16  # unknown windows/pictures kept for the user to label, the oldest dropped first
@@ -52,9 +52,9 @@ OnProgress = Callable[[int, int], None]
 class Kept:
     """An unknown window or picture, held until the user labels it."""
 
-    sense: str  # "audio" | "image"
+    sense: str  # "audio", "image", or a sample sense ("motion": readings (n, channels))
     data: np.ndarray
-    rate: int = 0
+    rate: int = 0  # samples (or readings) a second; 0 for a picture
 
 
 class Unknowns:
@@ -181,6 +181,10 @@ def write_labelled(root: Path, scene: str, window_id: str, kept: Kept) -> Path:
     stamp = time.strftime("%Y%m%d-%H%M%S")
     if kept.sense == "audio":
         return write_wav(root / scene / f"heard-{stamp}-{window_id}.wav", kept.data, kept.rate)
+    if kept.sense in SAMPLE_SENSES:
+        kind = SENSES[kept.sense]
+        path = root / scene / f"felt-{stamp}-{window_id}{kind.suffixes[0]}"
+        return write_sample_csv(path, kept.data, kept.rate, str(kind.stream))
     ok, png = cv2.imencode(".png", kept.data)
     if not ok:
         raise ServantError(f"{window_id}: the picture could not be encoded as PNG")
@@ -192,6 +196,9 @@ def folded_in(recogniser: Any, kept: Kept, scene: str) -> Any:
     if kept.sense == "audio":
         samples = resample(kept.data, kept.rate, getattr(recogniser, "rate", kept.rate))
         X = recogniser.featurize(samples[None, :])
+    elif kept.sense in SAMPLE_SENSES:
+        rows = resampled_rows(kept.data, kept.rate, int(getattr(recogniser, "rate", kept.rate)))
+        X = recogniser.featurize([rows])
     else:
         X = recogniser.featurize([kept.data])
     model = copy.deepcopy(recogniser)

@@ -63,7 +63,9 @@ class LabelPrompt(ModalScreen[str | None]):
         self.known_scenes = known_scenes
 
     def compose(self) -> ComposeResult:
-        sense = "heard" if self.event.sense == "audio" else "saw"
+        sense = {"audio": "heard", "image": "saw"}.get(
+            self.event.sense, f"felt ({self.event.sense})"
+        )
         nearest = self.event.nearest_scene or "nothing known"
         with Vertical(id="label-prompt", classes="dialog"):
             yield Label(f"Servant {sense} a place it does not know (nearest: {nearest}).")
