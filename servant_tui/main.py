@@ -19,7 +19,7 @@ from servant_core.demo.space import throwaway_space
 from servant_core.engine import build_demo_engine
 from servant_core.errors import ServantError
 from servant_core.progress import Progress
-from servant_tui.heap import release_free_heap
+from servant_tui.heap import limit_heaps, release_free_heap
 from servant_tui.memtrace import start_from_environment as start_memtrace
 
 
@@ -44,6 +44,7 @@ def run_tui(engine_factory: Callable[[], Any], mode: str) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    limit_heaps()  # before the engine's and Textual's threads start
     start_memtrace()  # a developer option, off unless SERVANT_MEMTRACE is set
     headless = getattr(args, "headless", False)
     if args.command is None or (args.command == "run" and not headless and not args.list_devices):

@@ -120,3 +120,46 @@ async def test_the_running_app_gives_free_heap_back_on_a_timer(tmp_path, monkeyp
                 break
             await pilot.pause(0.05)
     assert len(trims) >= 3
+
+
+ARENAS_SCRIPT = """
+import ctypes, sys, threading
+import numpy as np
+from servant_tui.heap import limit_heaps
+
+if sys.argv[1] == "limit":
+    limit_heaps(2)
+together = threading.Barrier(6)
+kept = []
+
+def allocate():
+    together.wait()  # six threads alive at once: each would get a heap of its own
+    kept.append([np.ones(1000) for _ in range(100)])  # 8 KB arrays: from the thread's heap
+    together.wait()
+
+threads = [threading.Thread(target=allocate) for _ in range(6)]
+for thread in threads:
+    thread.start()
+for thread in threads:
+    thread.join()
+ctypes.CDLL("libc.so.6").malloc_stats()  # one "Arena N:" block per heap, on stderr
+"""
+
+
+@pytest.mark.parametrize(("mode", "most"), [("limit", 2), ("none", 16)])
+def test_threads_share_two_heaps_once_limited(mode, most):
+    """The app's threads share two C heaps (`limit_heaps`, called first thing by `servant`):
+    by default glibc gives each new thread its own, and keeps what each frees (issue 13)."""
+    import ctypes.util
+    import subprocess
+    import sys
+
+    if "libc.so.6" not in (ctypes.util.find_library("c") or ""):
+        pytest.skip("not glibc")
+    result = subprocess.run(
+        [sys.executable, "-c", ARENAS_SCRIPT, mode], capture_output=True, text=True, check=True
+    )
+    heaps = sum(line.startswith("Arena ") for line in result.stderr.splitlines())
+    assert 1 <= heaps <= most
+    if mode == "none":
+        assert heaps > 2  # the default the limit changes (so the limited case can fail)
