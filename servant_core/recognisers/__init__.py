@@ -60,7 +60,7 @@ def make_audio_recogniser(method: str, **params: Any) -> AcousticRecogniser:
 # demo use: the methods beyond the paper that lead on every protocol (docs/research.md).
 FRESH_METHODS = {
     "audio": "kmeans-encoder",
-    "image": "bovw",
+    "image": "fisher-bovw",
     **{name: SAMPLE_METHOD for name in SAMPLE_SENSES},
 }
 
