@@ -59,6 +59,13 @@ PARAM_LIMITS: dict[str, tuple[float, float]] = {
     "size": (8, 2048),
     "cell": (1, 256),
     "n_bins": (1, 360),
+    # fisher-bovw: dense SIFT's cell widths and grid step, its PCA and mixture, the head's space
+    "bin_sizes": (1, 64),
+    "step": (1, 256),
+    "pca_dim": (1, 128),
+    "n_components": (1, 512),
+    "head_dim": (1, 4096),
+    "max_mixture_descriptors": (1, 10_000_000),
 }
 GENERIC_LIMIT = (-1e9, 1e9)
 # the senses whose `rate` is a sensor's readings a second, not an audio sample rate

@@ -9,6 +9,7 @@ from servant_core.errors import ServantError
 from servant_core.recognisers.base import UNKNOWN, AcousticRecogniser, Recogniser
 from servant_core.recognisers.bovw import BovwVisualRecogniser
 from servant_core.recognisers.codebook import CodebookAcousticRecogniser
+from servant_core.recognisers.fisher_bovw import FisherBovwVisualRecogniser
 from servant_core.recognisers.kmeans_encoder import KMeansEncoderAcousticRecogniser
 from servant_core.recognisers.paper import PaperAcousticRecogniser, PaperVisualRecogniser
 from servant_core.recognisers.softbovw import SoftBovwVisualRecogniser
@@ -23,6 +24,7 @@ VISUAL_METHODS: dict[str, type[Recogniser]] = {
     "paper": PaperVisualRecogniser,
     "bovw": BovwVisualRecogniser,
     "softbovw": SoftBovwVisualRecogniser,
+    "fisher-bovw": FisherBovwVisualRecogniser,
 }
 
 
@@ -58,7 +60,7 @@ def make_audio_recogniser(method: str, **params: Any) -> AcousticRecogniser:
 # demo use: the methods beyond the paper that lead on every protocol (docs/research.md).
 FRESH_METHODS = {
     "audio": "kmeans-encoder",
-    "image": "bovw",
+    "image": "fisher-bovw",
     **{name: SAMPLE_METHOD for name in SAMPLE_SENSES},
 }
 

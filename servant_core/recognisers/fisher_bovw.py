@@ -1,0 +1,382 @@
+"""`fisher-bovw`: Fisher vectors over dense SIFT, with a linear head.
+
+1. Each picture's central square gives dense RootSIFT descriptors at two scales
+   (`features.dense_sift`); beside them, the whole square's hue × saturation × value histogram.
+2. Learned on the training descriptors: a PCA to `pca_dim` dimensions (decorrelated, as the
+   diagonal mixture below assumes), to which each patch's place in the picture (x, y) is
+   appended (Sánchez et al. 2012: the layout without a pyramid's many copies), and a diagonal
+   Gaussian mixture of `n_components` — the soft visual words.
+3. A picture is its improved Fisher vector (Perronnin, Sánchez & Mensink 2010): the gradient of
+   its patches' log-likelihood with respect to each component's mean and spread, power-
+   normalised (signed square root) and scaled to unit length, and beside it the square-rooted
+   HSV histogram, weighted by `colour_weight`.
+4. The head works in the first `head_dim` principal directions of the training pictures' vectors
+   (kept small: the model file holds the directions and the training rows, a few megabytes):
+   a multinomial logistic regression, balanced class weights, its regularisation chosen by
+   stratified folds of the training pictures (a picture and its mirror on the same side;
+   one-standard-error rule). Every training picture is also learned as its mirror image,
+   computed from its descriptors (`dense_sift.mirror_order`).
+5. Open set: one centroid per scene in the head's space with its spread (`SceneCentroids`); a
+   picture farther than the training pictures' own distances (times a margin) from every
+   centroid is "unknown place". `fold_in` keeps everything but the head, refitted with the new
+   rows.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, ClassVar, Self
+
+import numpy as np
+from sklearn.exceptions import NotFittedError
+from sklearn.linear_model import LogisticRegression
+from sklearn.metrics import balanced_accuracy_score
+from sklearn.mixture import GaussianMixture
+from sklearn.model_selection import StratifiedKFold
+
+from servant_core.features.dense_sift import (
+    DEFAULT_BIN_SIZES,
+    DEFAULT_SIFT_SIZE,
+    DEFAULT_STEP,
+    SIFT_DIM,
+    dense_root_sift,
+    keypoint_positions,
+    mirror_order,
+)
+from servant_core.features.descriptors import DEFAULT_HSV_BINS, hsv_histogram, square_thumbnail
+from servant_core.recognisers.base import PERCENT, UNKNOWN, check_training_scenes, init_params
+from servant_core.recognisers.centroids import SceneCentroids
+from servant_core.recognisers.softbovw import one_standard_error_choice
+
+C_GRID = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0)
+MIN_VARIANCE = 1e-4
+# a 128-pixel square at the default grid has 685 patches; a model asking for many more (a
+# doctored file: size 2048, step 1) would take gigabytes a picture
+MAX_PATCHES = 20_000
+
+
+def power_l2(vectors: np.ndarray) -> np.ndarray:
+    """The improved Fisher vector's normalisation: signed square root, then unit length."""
+    rooted = np.sign(vectors) * np.sqrt(np.abs(vectors))
+    return rooted / (np.linalg.norm(rooted, axis=-1, keepdims=True) + 1e-12)
+
+
+def fisher_vectors(
+    descriptors: np.ndarray, weights: np.ndarray, means: np.ndarray, variances: np.ndarray
+) -> np.ndarray:
+    """(n, 2·K·d) Fisher vectors of n pictures' (n, P, d) descriptors under a diagonal Gaussian
+    mixture (K weights, (K, d) means and variances): per component, the normalised gradients
+    with respect to its mean, then to its standard deviation (Perronnin et al. 2010, eq. 16–17),
+    each averaged over the P descriptors. Not yet power- or L2-normalised."""
+    x = np.asarray(descriptors, dtype=np.float32)
+    n, p, d = x.shape
+    sigma = np.sqrt(variances).astype(np.float32)
+    inv_var = (1.0 / variances).astype(np.float32)
+    # log N(x | μ_k, σ_k²) + log w_k, expanded so that no (n, P, K, d) array is formed
+    log_p = (
+        -0.5 * ((x**2) @ inv_var.T - 2 * x @ (means * inv_var).T.astype(np.float32))
+        - 0.5 * np.sum(means**2 * inv_var, axis=1)
+        - np.sum(np.log(sigma), axis=1)
+        + np.log(weights)
+    ).astype(np.float32)
+    log_p -= log_p.max(axis=2, keepdims=True)
+    gamma = np.exp(log_p)
+    gamma /= gamma.sum(axis=2, keepdims=True)
+    s0 = gamma.sum(axis=1)  # (n, K)
+    s1 = np.einsum("npk,npd->nkd", gamma, x)
+    s2 = np.einsum("npk,npd->nkd", gamma, x**2)
+    mu = means[None].astype(np.float32)
+    g_mean = (s1 - mu * s0[..., None]) / sigma[None]
+    g_sigma = (s2 - 2 * mu * s1 + mu**2 * s0[..., None]) * inv_var[None] - s0[..., None]
+    g_mean /= (p * np.sqrt(weights))[None, :, None]
+    g_sigma /= (p * np.sqrt(2 * weights))[None, :, None]
+    return np.concatenate([g_mean.reshape(n, -1), g_sigma.reshape(n, -1)], axis=1)
+
+
+class FisherBovwVisualRecogniser:
+    method: ClassVar[str] = "fisher-bovw"
+    sense: ClassVar[str] = "image"
+    confidence_unit: ClassVar[str] = PERCENT
+
+    def __init__(
+        self,
+        *,
+        size: int = DEFAULT_SIFT_SIZE,
+        bin_sizes: Sequence[int] = DEFAULT_BIN_SIZES,
+        step: int = DEFAULT_STEP,
+        pca_dim: int = 64,
+        n_components: int = 64,
+        xy: bool = True,
+        hsv_bins: Sequence[int] = DEFAULT_HSV_BINS,
+        colour_weight: float = 0.5,
+        head_dim: int = 256,
+        mirror: bool = True,
+        C: float | None = None,
+        cv_folds: int = 4,
+        max_mixture_descriptors: int = 50000,
+        reject_quantile: float = 0.95,
+        reject_margin: float = 1.5,
+        random_state: int | None = 0,
+    ) -> None:
+        self.size = size
+        self.bin_sizes = bin_sizes
+        self.step = step
+        self.pca_dim = pca_dim
+        self.n_components = n_components
+        self.xy = xy
+        self.hsv_bins = hsv_bins
+        self.colour_weight = colour_weight
+        self.head_dim = head_dim
+        self.mirror = mirror
+        self.C = C
+        self.cv_folds = cv_folds
+        self.max_mixture_descriptors = max_mixture_descriptors
+        self.reject_quantile = reject_quantile
+        self.reject_margin = reject_margin
+        self.random_state = random_state
+
+    def params(self) -> dict[str, Any]:
+        return init_params(self)
+
+    def _check_grid(self) -> None:
+        patches = len(keypoint_positions(self.size, self.bin_sizes, self.step))
+        if patches > MAX_PATCHES:
+            raise ValueError(f"{patches} patches a picture, more than {MAX_PATCHES}")
+
+    # --- features --------------------------------------------------------------------------
+
+    def featurize(self, pictures: Sequence[np.ndarray]) -> np.ndarray:
+        """(n, patches·128 + hsv bins) float16: each picture's RootSIFT descriptors, flattened,
+        then its HSV histogram (float16 halves what a library's pictures take in memory; the
+        descriptors are unit-length square roots, well within its precision)."""
+        rows = []
+        for picture in pictures:
+            sift = dense_root_sift(picture, self.size, self.bin_sizes, self.step)
+            hsv = hsv_histogram(square_thumbnail(picture, self.size), self.hsv_bins)
+            rows.append(np.concatenate([sift.ravel(), hsv]))
+        return np.asarray(rows, dtype=np.float16)
+
+    def _split(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Descriptors (n, patches, 128) and HSV histograms (n, h), float32."""
+        X = np.asarray(X)
+        n_hsv = int(np.prod(self.hsv_bins))
+        sift = X[:, :-n_hsv].astype(np.float32).reshape(len(X), -1, SIFT_DIM)
+        return sift, X[:, -n_hsv:].astype(np.float32)
+
+    def _mirrored(self, sift: np.ndarray) -> np.ndarray:
+        patches, dims = mirror_order(self.size, self.bin_sizes, self.step)
+        return sift[:, patches][:, :, dims]
+
+    def _local(self, sift: np.ndarray) -> np.ndarray:
+        """(n, P, pca_dim [+ 2]) the descriptors in the PCA's space, with their places."""
+        local = (sift - self.pca_mean_) @ self.pca_components_.T
+        if self.xy:
+            places = keypoint_positions(self.size, self.bin_sizes, self.step) - 0.5
+            local = np.concatenate([local, np.broadcast_to(places, (*local.shape[:2], 2))], axis=2)
+        return local.astype(np.float32)
+
+    def _fit_mixture(self, sift: np.ndarray) -> None:
+        rng = np.random.default_rng(self.random_state)
+        flat = sift.reshape(-1, SIFT_DIM)
+        if len(flat) > self.max_mixture_descriptors:
+            flat = flat[rng.choice(len(flat), self.max_mixture_descriptors, replace=False)]
+        self.pca_mean_ = flat.mean(axis=0).astype(np.float32)
+        _, _, vt = np.linalg.svd(flat - self.pca_mean_, full_matrices=False)
+        self.pca_components_ = vt[: self.pca_dim].astype(np.float32)
+        n_pictures, n_patches = sift.shape[:2]
+        picks = rng.choice(n_pictures * n_patches, len(flat), replace=False)
+        local = self._local(sift).reshape(-1, self._local_dim())[picks]
+        mixture = GaussianMixture(
+            n_components=min(self.n_components, len(local)),
+            covariance_type="diag",
+            reg_covar=MIN_VARIANCE,
+            max_iter=100,
+            random_state=self.random_state,
+        ).fit(local)
+        self.weights_ = mixture.weights_.astype(np.float32)
+        self.means_ = mixture.means_.astype(np.float32)
+        self.variances_ = mixture.covariances_.astype(np.float32)
+
+    def _local_dim(self) -> int:
+        return self.pca_dim + (2 if self.xy else 0)
+
+    def _encode(self, sift: np.ndarray, hsv: np.ndarray) -> np.ndarray:
+        """The normalised Fisher vector beside the weighted, square-rooted HSV histogram."""
+        vectors = [
+            power_l2(fisher_vectors(self._local(part), self.weights_, self.means_, self.variances_))
+            for part in np.array_split(sift, max(1, len(sift) // 64))
+        ]
+        return np.hstack([np.vstack(vectors), self.colour_weight * np.sqrt(hsv)])
+
+    def _projected(self, encoded: np.ndarray) -> np.ndarray:
+        return ((encoded - self.encoding_mean_) @ self.directions_.T) / self.scale_
+
+    def describe(self, X: np.ndarray) -> np.ndarray:
+        """(n, head_dim) the pictures in the head's space."""
+        self._check_fitted()
+        return self._projected(self._encode(*self._split(X)))
+
+    # --- fitting ---------------------------------------------------------------------------
+
+    def fit(self, X: np.ndarray, scenes: Sequence[str] | np.ndarray) -> Self:
+        check_training_scenes(scenes, len(X))
+        self._check_grid()
+        labels = np.asarray(scenes).astype(str)
+        sift, hsv = self._split(X)
+        if self.mirror:
+            sift = np.concatenate([sift, self._mirrored(sift)])
+            hsv = np.concatenate([hsv, hsv])  # the mirror image has the same colours
+        self._fit_mixture(sift)
+        encoded = self._encode(sift, hsv)
+        self.encoding_mean_ = encoded.mean(axis=0).astype(np.float32)
+        centred = encoded - self.encoding_mean_
+        _, singular, vt = np.linalg.svd(centred, full_matrices=False)
+        dims = min(self.head_dim, int(np.sum(singular > 1e-6 * singular[0])))
+        self.directions_ = vt[:dims].astype(np.float32)
+        # one scale for every direction: the leading ones keep their larger share
+        self.scale_ = float(np.sqrt(np.mean((centred @ self.directions_.T) ** 2))) or 1.0
+        D = self._projected(encoded)
+        rows_labels = np.concatenate([labels, labels]) if self.mirror else labels
+        self.C_ = self.C if self.C is not None else self._choose_C(D, rows_labels, len(labels))
+        self.train_rows_ = D.astype(np.float32)
+        self.train_scenes_ = rows_labels
+        self._fit_head()
+        self.novelty_head_ = SceneCentroids.fit(
+            D[: len(labels)], labels, 1, self.reject_quantile, self.reject_margin, self.random_state
+        )
+        return self
+
+    def _head(self, C: float) -> LogisticRegression:
+        # balanced: a scene with three times the pictures must not win every doubtful picture
+        return LogisticRegression(C=C, class_weight="balanced", max_iter=3000)
+
+    def _choose_C(self, D: np.ndarray, labels: np.ndarray, n_pictures: int) -> float:
+        """The regularisation chosen by stratified folds of the training pictures (a picture and
+        its mirror on the same side): the smallest C whose mean balanced accuracy is within one
+        standard error of the best. The grid's smallest with too few pictures to fold."""
+        pictures = labels[:n_pictures]
+        smallest = int(min(np.unique(pictures, return_counts=True)[1]))
+        folds = min(self.cv_folds, smallest)
+        if folds < 2:
+            return C_GRID[0]
+        cv = StratifiedKFold(folds, shuffle=True, random_state=self.random_state)
+        scores = np.zeros((len(C_GRID), folds))
+        copies = len(labels) // n_pictures
+        for k, (train, test) in enumerate(cv.split(pictures, pictures)):
+            rows = np.concatenate([train + c * n_pictures for c in range(copies)])
+            for i, C in enumerate(C_GRID):
+                head = self._head(C).fit(D[rows], labels[rows])
+                scores[i, k] = balanced_accuracy_score(pictures[test], head.predict(D[test]))
+        return float(C_GRID[one_standard_error_choice(scores)])
+
+    def _fit_head(self) -> None:
+        self.head_ = self._head(self.C_).fit(self.train_rows_, self.train_scenes_)
+        # the model file keeps the weights in float32: the fitted model must answer as the loaded
+        self.head_.coef_ = self.head_.coef_.astype(np.float32).astype(np.float64)
+
+    # --- using it --------------------------------------------------------------------------
+
+    @property
+    def scenes_(self) -> list[str]:
+        self._check_fitted()
+        return [str(s) for s in self.head_.classes_]
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "head_"):
+            raise NotFittedError(f"this {type(self).__name__} is not fitted yet; call fit first")
+
+    def predict_proba(self, X: np.ndarray) -> np.ndarray:
+        return self.head_.predict_proba(self.describe(X))
+
+    def predict(self, X: np.ndarray) -> np.ndarray:
+        D = self.describe(X)
+        names = np.asarray(self.scenes_, dtype=object)[
+            np.argmax(self.head_.predict_proba(D), axis=1)
+        ]
+        names[self.novelty_head_.is_unknown(D)] = UNKNOWN
+        return names.astype(str)
+
+    def confidence(self, X: np.ndarray) -> np.ndarray:
+        """The probability of the most likely scene, in percent."""
+        return 100.0 * np.max(self.predict_proba(X), axis=1)
+
+    def novelty(self, X: np.ndarray) -> np.ndarray:
+        """Distance to the nearest scene centroid in its spreads, over the rejection distance:
+        above 1 a picture is unknown."""
+        D = self.describe(X)
+        return self.novelty_head_.nearest_scaled(D) / self.novelty_head_.reject_distance
+
+    def fold_in(self, X: np.ndarray, scenes: Sequence[str]) -> Self:
+        """Add pictures with confirmed scenes (a new scene too): the mixture, the head's space
+        and C stay; the head is refitted on the kept training rows plus these."""
+        if len(scenes) != len(X):
+            raise ValueError(f"{len(X)} feature rows but {len(scenes)} scene labels")
+        sift, hsv = self._split(X)
+        D = self.describe(X)
+        labels = np.asarray(scenes).astype(str)
+        new = [D]
+        if self.mirror:
+            new.append(self._projected(self._encode(self._mirrored(sift), hsv)))
+        self.train_rows_ = np.vstack([self.train_rows_, *new]).astype(np.float32)
+        self.train_scenes_ = np.concatenate([self.train_scenes_, *[labels] * len(new)])
+        self._fit_head()
+        self.novelty_head_.fold_in(D, list(scenes))
+        return self
+
+    # --- model files -----------------------------------------------------------------------
+
+    def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        self._check_fitted()
+        novelty, novelty_arrays = self.novelty_head_.state()
+        header = {
+            "params": self.params(),
+            "C_": self.C_,
+            "scale_": self.scale_,
+            "novelty": novelty,
+            "scenes": self.scenes_,
+        }
+        arrays = {
+            "pca_mean": self.pca_mean_,
+            "pca_components": self.pca_components_,
+            "weights": self.weights_,
+            "means": self.means_,
+            "variances": self.variances_,
+            "encoding_mean": self.encoding_mean_,
+            "directions": self.directions_,
+            "train_rows": self.train_rows_,
+            # scenes as indices into the sorted scene list: no object arrays in the file
+            "train_scenes": np.searchsorted(self.scenes_, self.train_scenes_),
+            "coef": self.head_.coef_.astype(np.float32),
+            "intercept": self.head_.intercept_,
+            **{f"novelty_{k}": v for k, v in novelty_arrays.items()},
+        }
+        return header, arrays
+
+    @classmethod
+    def from_state(cls, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> Self:
+        model = cls(**header["params"])
+        model._check_grid()
+        model.pca_mean_ = np.asarray(arrays["pca_mean"], dtype=np.float32)
+        model.pca_components_ = np.asarray(arrays["pca_components"], dtype=np.float32)
+        model.weights_ = np.asarray(arrays["weights"], dtype=np.float32)
+        model.means_ = np.asarray(arrays["means"], dtype=np.float32)
+        model.variances_ = np.asarray(arrays["variances"], dtype=np.float32)
+        if not (np.all(model.weights_ > 0) and np.all(model.variances_ > 0)):
+            raise ValueError("its mixture has a weight or variance that is not above zero")
+        model.encoding_mean_ = np.asarray(arrays["encoding_mean"], dtype=np.float32)
+        model.directions_ = np.asarray(arrays["directions"], dtype=np.float32)
+        model.scale_ = float(header["scale_"])
+        model.C_ = float(header["C_"])
+        model.train_rows_ = np.asarray(arrays["train_rows"], dtype=np.float32)
+        model.train_scenes_ = np.asarray(header["scenes"])[
+            np.asarray(arrays["train_scenes"], dtype=np.intp)
+        ]
+        head = model._head(model.C_)
+        head.classes_ = np.asarray(header["scenes"])
+        head.coef_ = np.asarray(arrays["coef"], dtype=np.float64)
+        head.intercept_ = np.asarray(arrays["intercept"], dtype=np.float64)
+        head.n_features_in_ = head.coef_.shape[1]
+        model.head_ = head
+        prefixed = {k[len("novelty_") :]: v for k, v in arrays.items() if k.startswith("novelty_")}
+        model.novelty_head_ = SceneCentroids.from_state(header["novelty"], prefixed)
+        return model
