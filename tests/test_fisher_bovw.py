@@ -23,6 +23,7 @@ from servant_core.recognisers import UNKNOWN, make_recogniser
 from servant_core.recognisers.fisher_bovw import (
     FisherBovwVisualRecogniser,
     fisher_vectors,
+    leading_directions,
     power_l2,
 )
 from tests.conftest import link_library
@@ -81,6 +82,16 @@ def test_fisher_vector_of_descriptors_at_the_means_has_no_mean_gradient() -> Non
 def test_power_l2_normalisation() -> None:
     out = power_l2(np.array([[4.0, -9.0, 0.0]]))
     np.testing.assert_allclose(out, [[2 / np.sqrt(13), -3 / np.sqrt(13), 0.0]])
+
+
+@pytest.mark.parametrize("shape", [(40, 300), (300, 40)])  # fewer rows than columns, and more
+def test_leading_directions_are_the_svds(shape) -> None:
+    rows = np.random.default_rng(0).normal(size=shape).astype(np.float32)
+    rows -= rows.mean(axis=0)
+    singular, vt = leading_directions(rows, 10, block=16)  # blocks that do not divide the sizes
+    _, expected, expected_vt = np.linalg.svd(rows, full_matrices=False)
+    np.testing.assert_allclose(singular, expected[:10], atol=1e-4)
+    np.testing.assert_allclose(np.abs(np.sum(vt * expected_vt[:10], axis=1)), 1.0, atol=1e-6)
 
 
 def small_model(**params) -> FisherBovwVisualRecogniser:
