@@ -51,7 +51,6 @@ TEMPERATURE = 2.0
 # Parameters a model file saved before they existed lacks, at the value that reproduces how that
 # model behaved (not today's default): its probabilities stay as they were.
 LEGACY_PARAMS: dict[str, Any] = {"temperature": 1.0}
-NOISE_SNR_DB = (10.0, 25.0)  # the noise floors of `noise_copies`, evenly spaced
 
 
 def frame_statistics(frames: np.ndarray) -> np.ndarray:
@@ -93,16 +92,6 @@ def equalised(frames: np.ndarray, curve: np.ndarray) -> np.ndarray:
     return (frames + curve).astype(np.float32)
 
 
-def noised(frames: np.ndarray, snr_db: float) -> np.ndarray:
-    """(n, frames, bands) level-free log-mel windows with a steady noise floor added `snr_db` below
-    each window's mean band energy, level removed again: the same place through a noisier
-    microphone or over a hum."""
-    energy = np.power(10.0, frames, dtype=np.float64)
-    floor = energy.mean(axis=(1, 2), keepdims=True) * 10.0 ** (-snr_db / 10.0)
-    out = np.log10(energy + floor)
-    return (out - out.mean(axis=(1, 2), keepdims=True)).astype(np.float32)
-
-
 def softmax_proba(scores: np.ndarray) -> np.ndarray:
     scores = scores - scores.max(axis=1, keepdims=True)
     e = np.exp(scores)
@@ -130,8 +119,6 @@ class KMeansEncoderAcousticRecogniser:
         crops: int = 4,
         crop_fraction: float = 0.25,
         eq_strength: float = 0.45,
-        noise_copies: int = 0,
-        centre_frames: bool = False,
         max_codebook_frames: int = 20000,
         reject_quantile: float = 0.95,
         reject_margin: float = 1.7,
@@ -151,8 +138,6 @@ class KMeansEncoderAcousticRecogniser:
         self.crops = crops
         self.crop_fraction = crop_fraction
         self.eq_strength = eq_strength
-        self.noise_copies = noise_copies
-        self.centre_frames = centre_frames
         self.max_codebook_frames = max_codebook_frames
         self.reject_quantile = reject_quantile
         self.reject_margin = reject_margin
@@ -179,12 +164,8 @@ class KMeansEncoderAcousticRecogniser:
         rng = np.random.default_rng(self.random_state)
         curves = eq_curves(X.shape[-1], self.eq_strength, self.augment)
         views = [X] + [equalised(X, curve) for curve in curves]
-        views += [
-            noised(X, snr)
-            for snr in np.linspace(NOISE_SNR_DB[0], NOISE_SNR_DB[1], self.noise_copies)
-        ]
         frames = np.concatenate(views)
-        flat = self._encoded(frames).reshape(-1, frames.shape[-1])
+        flat = frames.reshape(-1, frames.shape[-1])
         sample = flat[rng.choice(len(flat), min(len(flat), self.max_codebook_frames), False)]
         self.frame_mean_ = sample.mean(axis=0, dtype=np.float32)
         self.frame_scale_ = (sample.std(axis=0) + 1e-6).astype(np.float32)
@@ -263,17 +244,10 @@ class KMeansEncoderAcousticRecogniser:
     def describe(self, X: np.ndarray) -> np.ndarray:
         """Frame statistics beside every codebook's triangle encoding, before standardising."""
         frames = np.asarray(X, dtype=np.float32)
-        standard = (self._encoded(frames) - self.frame_mean_) / self.frame_scale_
+        standard = (frames - self.frame_mean_) / self.frame_scale_
         parts = [frame_statistics(frames)]
         parts += [triangle_encoding(standard, codebook) for codebook in self.codebooks_]
         return np.concatenate(parts, axis=1)
-
-    def _encoded(self, frames: np.ndarray) -> np.ndarray:
-        """The frames the codebooks learn and encode: with `centre_frames`, each window's own
-        per-band mean removed (spectral mean normalisation: a microphone's colouring gone)."""
-        if not self.centre_frames:
-            return frames
-        return frames - frames.mean(axis=1, keepdims=True)
 
     def _standardise(self, D: np.ndarray) -> np.ndarray:
         return (D - self.descriptor_mean_) / self.descriptor_scale_
