@@ -14,6 +14,7 @@ the others held at their best so far; one pass.
 
     OMP_NUM_THREADS=1 python bench/kmeans_encoder_search.py [--data ../shared/data/audio/dev]
         [--cache /tmp/servant-search]   # featurized windows kept between runs
+        [--try '{"noise_copies": 2}' ...]   # score the defaults and these changes, no search
 """
 
 from __future__ import annotations
@@ -106,6 +107,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=shared_data() / "audio" / "dev")
     parser.add_argument("--cache", type=Path, default=None)
+    parser.add_argument(
+        "--try",
+        dest="tries",
+        action="append",
+        type=json.loads,
+        default=[],
+        help="JSON parameters to score against the defaults instead of searching (repeatable)",
+    )
     args = parser.parse_args()
     library = SceneLibrary.scan(args.data)
     names = [str(r.path.relative_to(library.root)) for r in library.recordings]
@@ -136,6 +145,10 @@ def main() -> None:
         return scored[key]
 
     print(f"{'params':<110} grouped teach1 teach3")
+    if args.tries:
+        for change in [{}, *args.tries]:
+            score({**best, **change})
+        return
     for name, values in GRID.items():
         results = [(score({**best, name: value}), value) for value in values]
         top = max(r[0] for r in results)

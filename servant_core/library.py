@@ -23,8 +23,7 @@ from servant_core.audio import (
     read_audio,
 )
 from servant_core.errors import ServantError
-from servant_core.recognisers.base import UNKNOWN
-from servant_core.senses import PICTURE_SUFFIXES, SAMPLE_SENSES
+from servant_core.senses import PICTURE_SUFFIXES, SAMPLE_SENSES, UNKNOWN
 
 # A webcam frame is under 1 Mpx and a phone photo under 50 Mpx; a header claiming more is
 # damaged or hostile (a 1 MB PNG can claim gigabytes). Checked before decoding.

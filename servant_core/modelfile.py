@@ -55,6 +55,9 @@ PARAM_LIMITS: dict[str, tuple[float, float]] = {
     "fmax": (0.0, MAX_RATE / 2),
     "n_mels": (1, 512),
     "crop_fraction": (0.0, 1.0),  # kmeans-encoder: a part of a window
+    # kmeans-encoder divides its logits by it: near 0 every probability is 0 or 1 (and overflows),
+    # far above 10 every scene gets the same share
+    "temperature": (0.1, 10.0),
     "n_colours": (1, 64),
     "size": (8, 2048),
     "cell": (1, 256),

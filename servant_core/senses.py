@@ -20,6 +20,10 @@ from dataclasses import dataclass
 from servant_core.audio import AUDIO_SUFFIXES
 
 PICTURE_SUFFIXES = (".png", ".jpg", ".jpeg")
+# The scene a recogniser names when it knows none: never a scene folder's name. It lives here,
+# below both the scene library and the recognisers, so that the library need not import the
+# recognisers (whose registry imports capture, whose replay imports the library).
+UNKNOWN = "<unknown>"
 CENTROIDS = "servant_core.recognisers.sensor_centroids"
 SAMPLE_METHOD = "kmeans"  # the method name a sample sense's recogniser is registered under
 

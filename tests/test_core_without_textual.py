@@ -17,3 +17,16 @@ def test_servant_core_imports_without_textual():
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO)
     assert result.returncode == 0, result.stdout + result.stderr
     assert int(result.stdout.split()[0]) > 10  # the walk really imported the modules
+
+
+# the bench scripts import these first; each must import on its own, with nothing before it
+# (the scene library once imported the recognisers, whose registry imports the library back)
+FIRST_IMPORTS = ("servant_core.library", "servant_core.capture", "servant_core.recognisers")
+
+
+def test_core_modules_import_first_without_a_cycle():
+    for name in FIRST_IMPORTS:
+        result = subprocess.run(
+            [sys.executable, "-c", f"import {name}"], capture_output=True, text=True, cwd=REPO
+        )
+        assert result.returncode == 0, f"import {name}: {result.stderr[-400:]}"

@@ -88,7 +88,8 @@ def test_probabilities_sum_to_one_and_favour_the_truth(trained) -> None:
 def test_two_scenes_give_scikit_learns_probabilities(trained) -> None:
     model, scenes = trained
     X = model.featurize(np.concatenate([scenes["low"], scenes["mid"]]))
-    two = KMeansEncoderAcousticRecogniser(**SMALL).fit(X, ["low"] * 6 + ["mid"] * 6)
+    two = KMeansEncoderAcousticRecogniser(**SMALL, temperature=1.0)  # unsoftened
+    two.fit(X, ["low"] * 6 + ["mid"] * 6)
     reference = LogisticRegression(C=two.C, class_weight="balanced", max_iter=3000).fit(
         two.train_descriptors_, two.train_scenes_
     )
@@ -139,6 +140,67 @@ def test_model_file_crop_fraction_is_a_part_of_a_window(trained, tmp_path, value
         assert load_model(path)["acoustic"].crop_fraction == value
     else:
         refused_in_one_line(path)
+
+
+def with_temperature(model: KMeansEncoderAcousticRecogniser, temperature: float):
+    header, arrays = model.get_state()
+    header = {**header, "params": {**header["params"], "temperature": temperature}}
+    return KMeansEncoderAcousticRecogniser.from_state(header, arrays)
+
+
+def test_temperature_softens_the_probabilities_but_never_changes_a_decision(trained) -> None:
+    model, _ = trained
+    rng = np.random.default_rng(7)
+    X = model.featurize(np.concatenate([noise_scene(rng, c, 3) for c in (300, 1500, 4000, 800)]))
+    sharp, soft = with_temperature(model, 1.0), with_temperature(model, 3.0)
+    p_sharp, p_soft = sharp.predict_proba(X), soft.predict_proba(X)
+    np.testing.assert_allclose(p_soft.sum(axis=1), 1.0)
+    assert list(soft.predict(X)) == list(sharp.predict(X))
+    np.testing.assert_array_equal(np.argmax(p_soft, axis=1), np.argmax(p_sharp, axis=1))
+    assert np.all(p_soft.max(axis=1) < p_sharp.max(axis=1))  # less sure of every window...
+    logits = sharp.descriptors(X) @ sharp.coef_.T + sharp.intercept_
+    expected = np.exp(logits / 3.0) / np.exp(logits / 3.0).sum(axis=1, keepdims=True)
+    np.testing.assert_allclose(p_soft, expected, rtol=1e-6)  # ...as softmax(logits / T)
+    truth = np.argmax(p_sharp, axis=1)
+    loss = [float(-np.mean(np.log(p[np.arange(len(p)), truth]))) for p in (p_sharp, p_soft)]
+    assert loss[1] > loss[0]  # on windows it names right, softer costs log loss
+
+
+def test_a_model_file_saved_before_the_temperature_keeps_its_probabilities(
+    trained, tmp_path
+) -> None:
+    from tests.test_modelfile import rewrite_header
+
+    model, scenes = trained
+    path = save_model(tmp_path / "m.npz", {"acoustic": with_temperature(model, 2.5)})
+    rewrite_header(path, lambda h: h["recognisers"]["acoustic"]["params"].pop("temperature"))
+    loaded = load_model(path)["acoustic"]
+    assert loaded.temperature == 1.0  # as it was saved: no temperature then
+    X = model.featurize(scenes["mid"][:3])
+    np.testing.assert_allclose(
+        loaded.predict_proba(X), with_temperature(model, 1.0).predict_proba(X)
+    )
+
+
+@pytest.mark.parametrize("value", [0, -1.0, 0.01, 1e6, 2.0])
+def test_model_file_temperature_within_limits(trained, tmp_path, value) -> None:
+    from tests.test_modelfile import refused_in_one_line, rewrite_header
+
+    model, _ = trained
+    path = save_model(tmp_path / "m.npz", {"acoustic": model})
+    params = lambda h: h["recognisers"]["acoustic"]["params"]  # noqa: E731
+    rewrite_header(path, lambda h: params(h).update(temperature=value))
+    if value == 2.0:
+        assert load_model(path)["acoustic"].temperature == 2.0
+    else:
+        refused_in_one_line(path, "parameter temperature is .* outside 0.1–10")
+
+
+def test_a_temperature_at_or_below_zero_is_refused_by_fit(trained) -> None:
+    model, scenes = trained
+    X = model.featurize(np.concatenate([scenes["low"][:2], scenes["mid"][:2]]))
+    with pytest.raises(ValueError, match="temperature"):
+        KMeansEncoderAcousticRecogniser(**SMALL, temperature=0.0).fit(X, ["low"] * 2 + ["mid"] * 2)
 
 
 def test_registered_and_unfitted_raises() -> None:

@@ -25,8 +25,8 @@ from typing import Any, ClassVar, Protocol, Self
 import numpy as np
 
 from servant_core.errors import ServantError
+from servant_core.senses import UNKNOWN as UNKNOWN  # where every recogniser names it
 
-UNKNOWN = "<unknown>"
 PERCENT = "%"
 
 

@@ -17,10 +17,15 @@
 6. Open set: one K-Means centroid per scene over the standardised descriptors with its own
    spread (`SceneCentroids`); a window farther than the rejection distance from every centroid
    is `UNKNOWN`.
+7. Calibration: the probabilities are softmax(logits / `temperature`). The head is fitted to be
+   right on the training windows and is surer than it should be on windows it never saw (a
+   place heard through another microphone most of all); a temperature above 1 softens every
+   probability alike and never changes a decision.
 
 `C`, `augment`, `eq_strength`, `crops`, `crop_fraction`, `n_codewords` and `n_mels` are the
 choice of cross-validation grouped by recording inside the training part of the development
-library (`bench/kmeans_encoder_search.py`; docs/research.md, issue 11); the others are not.
+library (`bench/kmeans_encoder_search.py`; docs/research.md, issue 11), and `temperature` that of
+the same folds' log loss (`bench/kmeans_encoder_temperature.py`); the others are not.
 """
 
 from __future__ import annotations
@@ -40,6 +45,12 @@ from servant_core.recognisers.centroids import SceneCentroids
 ENCODER_RATE = 22050
 SCALE_FLOOR = 0.1
 NOVELTY_SHRINKAGE = 0.0
+# The softening of the head's probabilities (module docstring, 7): chosen by the log loss of the
+# parameter search's folds inside the training data (bench/kmeans_encoder_temperature.py).
+TEMPERATURE = 2.0
+# Parameters a model file saved before they existed lacks, at the value that reproduces how that
+# model behaved (not today's default): its probabilities stay as they were.
+LEGACY_PARAMS: dict[str, Any] = {"temperature": 1.0}
 
 
 def frame_statistics(frames: np.ndarray) -> np.ndarray:
@@ -111,6 +122,7 @@ class KMeansEncoderAcousticRecogniser:
         max_codebook_frames: int = 20000,
         reject_quantile: float = 0.95,
         reject_margin: float = 1.7,
+        temperature: float = TEMPERATURE,
         random_state: int | None = 0,
     ) -> None:
         self.rate = rate
@@ -129,6 +141,7 @@ class KMeansEncoderAcousticRecogniser:
         self.max_codebook_frames = max_codebook_frames
         self.reject_quantile = reject_quantile
         self.reject_margin = reject_margin
+        self.temperature = temperature
         self.random_state = random_state
 
     def params(self) -> dict[str, Any]:
@@ -144,6 +157,8 @@ class KMeansEncoderAcousticRecogniser:
 
     def fit(self, X: np.ndarray, scenes: Sequence[str] | np.ndarray) -> Self:
         check_training_scenes(scenes, len(X))
+        if not self.temperature > 0:
+            raise ValueError(f"temperature must be above 0, not {self.temperature!r}")
         X = np.asarray(X, dtype=np.float32)
         scenes_arr = np.asarray(scenes).astype(str)
         rng = np.random.default_rng(self.random_state)
@@ -251,7 +266,7 @@ class KMeansEncoderAcousticRecogniser:
             raise NotFittedError(f"this {type(self).__name__} is not fitted yet; call fit first")
 
     def _proba(self, D: np.ndarray) -> np.ndarray:
-        return softmax_proba(D @ self.coef_.T + self.intercept_)
+        return softmax_proba((D @ self.coef_.T + self.intercept_) / self.temperature)
 
     def predict_proba(self, X: np.ndarray) -> np.ndarray:
         return self._proba(self.descriptors(X))
@@ -300,7 +315,7 @@ class KMeansEncoderAcousticRecogniser:
 
     @classmethod
     def from_state(cls, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> Self:
-        model = cls(**header["params"])
+        model = cls(**{**LEGACY_PARAMS, **header["params"]})
         model.classes_ = [str(c) for c in header["classes"]]
         model.frame_mean_ = np.asarray(arrays["frame_mean"], dtype=np.float32)
         model.frame_scale_ = np.asarray(arrays["frame_scale"], dtype=np.float32)
