@@ -29,7 +29,6 @@ from typing import Any, ClassVar, Self
 
 import numpy as np
 import scipy.linalg
-from sklearn.exceptions import NotFittedError
 from sklearn.linear_model import LogisticRegression
 from sklearn.metrics import balanced_accuracy_score
 from sklearn.mixture import GaussianMixture
@@ -45,8 +44,9 @@ from servant_core.features.dense_sift import (
     mirror_order,
 )
 from servant_core.features.descriptors import DEFAULT_HSV_BINS, hsv_histogram, square_thumbnail
-from servant_core.recognisers.base import PERCENT, UNKNOWN, check_training_scenes, init_params
+from servant_core.recognisers.base import PERCENT, check_training_scenes, init_params
 from servant_core.recognisers.centroids import SceneCentroids
+from servant_core.recognisers.linear_head import LinearHeadAnswers
 from servant_core.recognisers.softbovw import one_standard_error_choice
 
 C_GRID = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0)
@@ -121,7 +121,7 @@ def fisher_vectors(
     return np.concatenate([g_mean.reshape(n, -1), g_sigma.reshape(n, -1)], axis=1)
 
 
-class FisherBovwVisualRecogniser:
+class FisherBovwVisualRecogniser(LinearHeadAnswers):
     method: ClassVar[str] = "fisher-bovw"
     sense: ClassVar[str] = "image"
     confidence_unit: ClassVar[str] = PERCENT
@@ -335,35 +335,8 @@ class FisherBovwVisualRecogniser:
 
     # --- using it --------------------------------------------------------------------------
 
-    @property
-    def scenes_(self) -> list[str]:
-        self._check_fitted()
-        return [str(s) for s in self.head_.classes_]
-
-    def _check_fitted(self) -> None:
-        if not hasattr(self, "head_"):
-            raise NotFittedError(f"this {type(self).__name__} is not fitted yet; call fit first")
-
-    def predict_proba(self, X: np.ndarray) -> np.ndarray:
-        return self.head_.predict_proba(self.describe(X))
-
-    def predict(self, X: np.ndarray) -> np.ndarray:
-        D = self.describe(X)
-        names = np.asarray(self.scenes_, dtype=object)[
-            np.argmax(self.head_.predict_proba(D), axis=1)
-        ]
-        names[self.novelty_head_.is_unknown(D)] = UNKNOWN
-        return names.astype(str)
-
-    def confidence(self, X: np.ndarray) -> np.ndarray:
-        """The probability of the most likely scene, in percent."""
-        return 100.0 * np.max(self.predict_proba(X), axis=1)
-
-    def novelty(self, X: np.ndarray) -> np.ndarray:
-        """Distance to the nearest scene centroid in its spreads, over the rejection distance:
-        above 1 a picture is unknown."""
-        D = self.describe(X)
-        return self.novelty_head_.nearest_scaled(D) / self.novelty_head_.reject_distance
+    def _space(self, X: np.ndarray) -> np.ndarray:
+        return self.describe(X)
 
     def fold_in(self, X: np.ndarray, scenes: Sequence[str]) -> Self:
         """Add pictures with confirmed scenes (a new scene too): the mixture, the head's space

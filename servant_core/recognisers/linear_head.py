@@ -1,0 +1,54 @@
+"""What picture recognisers with a linear head and a novelty head do once fitted.
+
+A recogniser that maps pictures into a space of its own (`_space(X)`), fits a probabilistic
+head there (`head_`, a scikit-learn classifier) and one centroid per scene with its spread
+(`novelty_head_`, `SceneCentroids`) answers every question the same way: this mixin.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from sklearn.exceptions import NotFittedError
+
+from servant_core.recognisers.base import UNKNOWN
+from servant_core.recognisers.centroids import SceneCentroids
+
+
+class LinearHeadAnswers:
+    head_: Any
+    novelty_head_: SceneCentroids
+
+    def _space(self, X: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    @property
+    def scenes_(self) -> list[str]:
+        self._check_fitted()
+        return [str(s) for s in self.head_.classes_]
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "head_"):
+            raise NotFittedError(f"this {type(self).__name__} is not fitted yet; call fit first")
+
+    def predict_proba(self, X: np.ndarray) -> np.ndarray:
+        return np.asarray(self.head_.predict_proba(self._space(X)))
+
+    def predict(self, X: np.ndarray) -> np.ndarray:
+        D = self._space(X)
+        names = np.asarray(self.scenes_, dtype=object)[
+            np.argmax(self.head_.predict_proba(D), axis=1)
+        ]
+        names[self.novelty_head_.is_unknown(D)] = UNKNOWN
+        return names.astype(str)
+
+    def confidence(self, X: np.ndarray) -> np.ndarray:
+        """The probability of the most likely scene, in percent."""
+        return 100.0 * np.max(self.predict_proba(X), axis=1)
+
+    def novelty(self, X: np.ndarray) -> np.ndarray:
+        """Distance to the nearest scene centroid in its spreads, over the rejection distance:
+        above 1 a picture is unknown."""
+        D = self._space(X)
+        return self.novelty_head_.nearest_scaled(D) / self.novelty_head_.reject_distance
