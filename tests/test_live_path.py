@@ -327,7 +327,8 @@ def test_an_armed_arm_whose_controller_vanishes_while_still_is_shown_disarmed(em
     try:
         emu.stop()
         deadline = clock.monotonic() + 15
-        while engine.link.armed and clock.monotonic() < deadline:
+        # the link disarms first, then the engine says so: wait for both
+        while (engine.link.armed or engine.status["servo"].ok) and clock.monotonic() < deadline:
             clock.sleep(0.05)
         assert not engine.link.armed
         assert not engine.status["servo"].ok and "lost" in engine.status["servo"].message
