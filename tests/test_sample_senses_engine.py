@@ -238,3 +238,41 @@ def test_an_unknown_motion_window_is_asked_about_labelled_and_folded_in(tmp_path
     felt = [e.scene for e in events if isinstance(e, SensePrediction)]
     assert felt == ["gym"], events
     assert "gym" in load_model(model_path)["motion"].scenes_
+
+
+def test_a_sample_sense_is_not_asked_about_a_place_another_sense_names(tmp_path):
+    """Motion does not know the gym, but the ambient sense, taught it, names it: the wearer is
+    not asked what motion felt (Servant knows where they are). Before, every unknown motion or
+    ambient window raised the "What is this place?" prompt, even while the other senses agreed."""
+    root = write_sensor_library(tmp_path / "library", seed=2, windows_per_scene=8)
+    for log in (root / "gym").glob("*.imu.csv"):
+        log.unlink()  # motion taught the café and the street; ambient all three
+    taught = Engine()
+    taught.retrain(SceneLibrary.scan(root))
+    gym = sorted(
+        (write_sensor_library(tmp_path / "new", seed=8, windows_per_scene=3) / "gym").iterdir()
+    )
+    clock = ManualClock()
+    engine = Engine(
+        samples={
+            "motion": replay_sample_files(
+                [p for p in gym if p.name.endswith(".imu.csv")], "imu", realtime=False, clock=clock
+            ),
+            "ambient": replay_sample_files(
+                [p for p in gym if p.name.endswith(".ambient.csv")],
+                "ambient",
+                realtime=False,
+                clock=clock,
+            ),
+        },
+        sample_recognisers=dict(taught.sample_recognisers),
+        clock=clock,
+    )
+    events: list = []
+    engine.subscribe(events.append)
+    engine.run_until(1e9)
+    said = [(e.sense, e.scene) for e in events if isinstance(e, SensePrediction)]
+    assert ("motion", None) in said and ("ambient", "gym") in said, said
+    first_named = next(i for i, e in enumerate(events) if getattr(e, "scene", None) == "gym")
+    asked_after = [e for e in events[first_named:] if isinstance(e, UnknownScene)]
+    assert asked_after == []

@@ -186,6 +186,8 @@ class Engine:
         self._notes: list[str] = []  # said to every subscriber when the senses open
         self._opened = False
         self._scores: dict[str, dict[str, float]] = {"acoustic": {}, "visual": {}}
+        # Each sense's last opinion: (when, the scene it named or None).
+        self._last_named: dict[str, tuple[float, str | None]] = {}
         self._scores.update({SENSES[sense].role: {} for sense in self.samples})
         self._unknowns = Unknowns()
         self.sensor_port: str | None = None  # the settings' board the senses were opened on
@@ -380,6 +382,7 @@ class Engine:
         """A sense's judgement to the fusion policy (called under `_lock`): a policy that takes
         every sense (`on_sense`, the learned one) hears them all with their probabilities; the
         rule policies hear sound and pictures only."""
+        self._last_named[sense] = (t, scene)
         on_sense = getattr(self.fusion, "on_sense", None)
         if on_sense is not None:
             return list(on_sense(sense, scene, confidence, t, scores))
@@ -402,11 +405,20 @@ class Engine:
             self._scores[SENSES[sense].role] = scores
         unit = recogniser.confidence_unit
         self._emit(SensePrediction(t, sense, scene if known else None, confidence, scores, unit))
-        if not known:
+        if not known and not self._named_elsewhere(sense, t):
             self._ask_label(Kept(sense, rows, int(getattr(recogniser, "rate", rate))), scores, t)
         with self._lock:
             events = self._judged(sense, scene if known else None, confidence, t, scores)
         self._handle(events)
+
+    def _named_elsewhere(self, sense: str, t: float) -> bool:
+        """Whether another sense named a place within the last two windows. A sample sense
+        (motion, ambient) that does not know a place the sound or the camera knows is not
+        worth asking the wearer about: they know where they are, and so does Servant."""
+        recent = t - 2 * self.window_seconds
+        with self._lock:
+            named = list(self._last_named.items())
+        return any(other != sense and scene and when >= recent for other, (when, scene) in named)
 
     def _forget_windows(self) -> None:
         """A new acoustic model: what the old one believed about past windows means nothing."""
