@@ -122,9 +122,7 @@ def test_encoding_weight_leans_the_head_on_the_frame_statistics(trained) -> None
         KMeansEncoderAcousticRecogniser(**SMALL, encoding_weight=-1.0).fit(X, y)
 
 
-def test_a_model_file_saved_before_the_encoding_weight_refits_as_before(
-    trained, tmp_path
-) -> None:
+def test_a_model_file_saved_before_the_encoding_weight_refits_as_before(trained, tmp_path) -> None:
     """An older file has no `encoding_weight`: it loads at 1 (its head was fitted unscaled), its
     probabilities are those saved, and a fold-in refits the head as the old code did."""
     from tests.test_modelfile import rewrite_header
