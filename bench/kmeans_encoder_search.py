@@ -53,6 +53,7 @@ GRID: dict[str, list[Any]] = {
     "crop_fraction": [0.25, 0.5],
     "n_codewords": [32, 64, 128],
     "n_mels": [40, 64],
+    "encoding_weight": [1.0, 0.5, 0.3, 0.15, 0.1, 0.05],
 }
 FEATURE_PARAMS = ("n_mels", "frame_seconds", "fmin", "fmax", "rate")
 FOLDS = 5

@@ -58,6 +58,8 @@ PARAM_LIMITS: dict[str, tuple[float, float]] = {
     # kmeans-encoder divides its logits by it: near 0 every probability is 0 or 1 (and overflows),
     # far above 10 every scene gets the same share
     "temperature": (0.1, 10.0),
+    # kmeans-encoder scales the encodings' columns by it in the head (0: statistics only)
+    "encoding_weight": (0.0, 10.0),
     "n_colours": (1, 64),
     "size": (8, 2048),
     "cell": (1, 256),

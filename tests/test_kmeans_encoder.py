@@ -90,12 +90,59 @@ def test_two_scenes_give_scikit_learns_probabilities(trained) -> None:
     X = model.featurize(np.concatenate([scenes["low"], scenes["mid"]]))
     two = KMeansEncoderAcousticRecogniser(**SMALL, temperature=1.0)  # unsoftened
     two.fit(X, ["low"] * 6 + ["mid"] * 6)
+    # the encodings' columns (after the 3 statistics a band) enter the head scaled
+    weights = np.full(two.train_descriptors_.shape[1], two.encoding_weight)
+    weights[: 3 * X.shape[-1]] = 1.0
     reference = LogisticRegression(C=two.C, class_weight="balanced", max_iter=3000).fit(
-        two.train_descriptors_, two.train_scenes_
+        two.train_descriptors_ * weights, two.train_scenes_
     )
     np.testing.assert_allclose(
-        two.predict_proba(X), reference.predict_proba(two.descriptors(X)), atol=1e-6
+        two.predict_proba(X), reference.predict_proba(two.descriptors(X) * weights), atol=1e-6
     )
+
+
+def test_encoding_weight_leans_the_head_on_the_frame_statistics(trained) -> None:
+    """A small `encoding_weight` makes the encodings' weights costly: the head's weight on them
+    shrinks against the statistics', and at 0 it reads the statistics alone."""
+    _, scenes = trained
+    X = KMeansEncoderAcousticRecogniser(**SMALL).featurize(
+        np.concatenate([scenes["low"][:3], scenes["mid"][:3]])
+    )
+    y = ["low"] * 3 + ["mid"] * 3
+    statistics = 3 * X.shape[-1]
+
+    def share(weight: float) -> float:
+        model = KMeansEncoderAcousticRecogniser(**SMALL, encoding_weight=weight).fit(X, y)
+        return float(np.abs(model.coef_[:, statistics:]).sum() / np.abs(model.coef_).sum())
+
+    assert KMeansEncoderAcousticRecogniser().encoding_weight == 0.1
+    assert share(0.1) < 0.5 * share(1.0)
+    assert share(0.0) == 0.0
+    with pytest.raises(ValueError, match="encoding_weight"):
+        KMeansEncoderAcousticRecogniser(**SMALL, encoding_weight=-1.0).fit(X, y)
+
+
+def test_a_model_file_saved_before_the_encoding_weight_refits_as_before(trained, tmp_path) -> None:
+    """An older file has no `encoding_weight`: it loads at 1 (its head was fitted unscaled), its
+    probabilities are those saved, and a fold-in refits the head as the old code did."""
+    from tests.test_modelfile import rewrite_header
+
+    _, scenes = trained
+    X = KMeansEncoderAcousticRecogniser(**SMALL).featurize(
+        np.concatenate([scenes["low"][:3], scenes["mid"][:3]])
+    )
+    y = ["low"] * 3 + ["mid"] * 3
+    old = KMeansEncoderAcousticRecogniser(**SMALL, encoding_weight=1.0).fit(X, y)
+    kept = load_model(save_model(tmp_path / "kept.npz", {"acoustic": old}))["acoustic"]
+    path = save_model(tmp_path / "m.npz", {"acoustic": old})
+    rewrite_header(path, lambda h: h["recognisers"]["acoustic"]["params"].pop("encoding_weight"))
+    loaded = load_model(path)["acoustic"]
+    assert loaded.encoding_weight == 1.0
+    np.testing.assert_allclose(loaded.predict_proba(X), old.predict_proba(X))
+    high = KMeansEncoderAcousticRecogniser(**SMALL).featurize(scenes["high"][:3])
+    loaded.fold_in(high, ["high"] * 3)
+    kept.fold_in(high, ["high"] * 3)
+    np.testing.assert_allclose(loaded.coef_, kept.coef_)
 
 
 def test_one_window_a_scene_does_not_collapse(trained) -> None:
@@ -217,4 +264,4 @@ def test_few_shot_on_the_real_recordings(shared_data) -> None:
 
     library = SceneLibrary.scan(shared_data / "audio" / "dev")
     result = evaluate_audio(library, "kmeans-encoder", "fewshot", shots=(3,))
-    assert result["rows"][0]["balanced_accuracy"] >= 0.85
+    assert result["rows"][0]["balanced_accuracy"] >= 0.92  # issue 11's target (0.880 before)

@@ -10,7 +10,12 @@
    the window: how much of the window sounds like each codeword.
 4. Multinomial logistic regression over the standardised statistics and encodings gives
    calibrated probabilities; it keeps one weight vector per scene, so a scene taught with one
-   window is not starved of centroids (no "one centroid per 8 rows").
+   window is not starved of centroids (no "one centroid per 8 rows"). The encodings' columns
+   enter the head scaled by `encoding_weight` (0.1): under the same L2 penalty their weights
+   cost 1/0.1² = 100 times more than the frame statistics', so with a few windows a scene the
+   head leans on the 192 steady statistics and not on which of 384 codewords three windows
+   happened to visit (few-shot k=3: a construction site heard as a supermarket). The weights
+   are folded back into the coefficients: the saved head reads the standardised descriptors.
 5. Robustness to the microphone: every training window is also seen through equalisations
    (a tilt and a bend of the log spectrum, evenly turned, not drawn at random: the model does
    not swing with a random state), so the head cannot lean on a recording's colouration.
@@ -22,10 +27,11 @@
    place heard through another microphone most of all); a temperature above 1 softens every
    probability alike and never changes a decision.
 
-`C`, `augment`, `eq_strength`, `crops`, `crop_fraction`, `n_codewords` and `n_mels` are the
-choice of cross-validation grouped by recording inside the training part of the development
-library (`bench/kmeans_encoder_search.py`; docs/research.md, issue 11), and `temperature` that of
-the same folds' log loss (`bench/kmeans_encoder_temperature.py`); the others are not.
+`C`, `augment`, `eq_strength`, `crops`, `crop_fraction`, `n_codewords`, `n_mels` and
+`encoding_weight` are the choice of cross-validation grouped by recording inside the training
+part of the development library (`bench/kmeans_encoder_search.py`; docs/research.md, issue 11),
+and `temperature` that of the same folds' log loss (`bench/kmeans_encoder_temperature.py`); the
+others are not.
 """
 
 from __future__ import annotations
@@ -48,9 +54,12 @@ NOVELTY_SHRINKAGE = 0.0
 # The softening of the head's probabilities (module docstring, 7): chosen by the log loss of the
 # parameter search's folds inside the training data (bench/kmeans_encoder_temperature.py).
 TEMPERATURE = 2.0
+# The scale of the encodings' columns against the frame statistics' in the head (module
+# docstring, 4): chosen by the parameter search's folds inside the training data.
+ENCODING_WEIGHT = 0.1
 # Parameters a model file saved before they existed lacks, at the value that reproduces how that
 # model behaved (not today's default): its probabilities stay as they were.
-LEGACY_PARAMS: dict[str, Any] = {"temperature": 1.0}
+LEGACY_PARAMS: dict[str, Any] = {"temperature": 1.0, "encoding_weight": 1.0}
 
 
 def frame_statistics(frames: np.ndarray) -> np.ndarray:
@@ -123,6 +132,7 @@ class KMeansEncoderAcousticRecogniser:
         reject_quantile: float = 0.95,
         reject_margin: float = 1.7,
         temperature: float = TEMPERATURE,
+        encoding_weight: float = ENCODING_WEIGHT,
         random_state: int | None = 0,
     ) -> None:
         self.rate = rate
@@ -142,6 +152,7 @@ class KMeansEncoderAcousticRecogniser:
         self.reject_quantile = reject_quantile
         self.reject_margin = reject_margin
         self.temperature = temperature
+        self.encoding_weight = encoding_weight
         self.random_state = random_state
 
     def params(self) -> dict[str, Any]:
@@ -159,6 +170,8 @@ class KMeansEncoderAcousticRecogniser:
         check_training_scenes(scenes, len(X))
         if not self.temperature > 0:
             raise ValueError(f"temperature must be above 0, not {self.temperature!r}")
+        if not self.encoding_weight >= 0:
+            raise ValueError(f"encoding_weight must be 0 or above, not {self.encoding_weight!r}")
         X = np.asarray(X, dtype=np.float32)
         scenes_arr = np.asarray(scenes).astype(str)
         rng = np.random.default_rng(self.random_state)
@@ -215,12 +228,21 @@ class KMeansEncoderAcousticRecogniser:
             NOVELTY_SHRINKAGE,
         )
 
+    def _column_weights(self) -> np.ndarray:
+        """Each descriptor column's scale in the head: 1 for the frame statistics,
+        `encoding_weight` for the encodings."""
+        weights = np.full(self.train_descriptors_.shape[1], float(self.encoding_weight))
+        weights[: 3 * self.frame_mean_.shape[0]] = 1.0
+        return weights
+
     def _fit_head(self) -> None:
         # Scenes come with very different numbers of windows; each weighs the same.
         head = LogisticRegression(C=self.C, class_weight="balanced", max_iter=3000)
-        head.fit(self.train_descriptors_, self.train_scenes_)
+        weights = self._column_weights()
+        head.fit(self.train_descriptors_ * weights, self.train_scenes_)
         self.classes_ = [str(c) for c in head.classes_]
-        coef, intercept = head.coef_, head.intercept_
+        # The weights folded into the coefficients: the head reads standardised descriptors.
+        coef, intercept = head.coef_ * weights, head.intercept_
         if len(self.classes_) == 2:  # scikit-learn keeps one weight vector for two classes
             coef = np.vstack([-coef / 2, coef / 2])
             intercept = np.array([-intercept[0] / 2, intercept[0] / 2])
