@@ -45,8 +45,9 @@ from sklearn.exceptions import NotFittedError
 from sklearn.linear_model import LogisticRegression
 
 from servant_core.features.logmel import DEFAULT_FMAX, DEFAULT_FMIN, log_mel_windows
-from servant_core.recognisers.base import PERCENT, UNKNOWN, check_training_scenes, init_params
+from servant_core.recognisers.base import PERCENT, check_training_scenes, init_params
 from servant_core.recognisers.centroids import SceneCentroids
+from servant_core.recognisers.linear_head import LinearHeadAnswers
 
 ENCODER_RATE = 22050
 SCALE_FLOOR = 0.1
@@ -107,7 +108,7 @@ def softmax_proba(scores: np.ndarray) -> np.ndarray:
     return e / e.sum(axis=1, keepdims=True)
 
 
-class KMeansEncoderAcousticRecogniser:
+class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
     method: ClassVar[str] = "kmeans-encoder"
     sense: ClassVar[str] = "audio"
     confidence_unit: ClassVar[str] = PERCENT
@@ -278,6 +279,9 @@ class KMeansEncoderAcousticRecogniser:
         self._check_fitted()
         return self._standardise(self.describe(X))
 
+    def _space(self, X: np.ndarray) -> np.ndarray:
+        return self.descriptors(X)
+
     @property
     def scenes_(self) -> list[str]:
         self._check_fitted()
@@ -289,25 +293,6 @@ class KMeansEncoderAcousticRecogniser:
 
     def _proba(self, D: np.ndarray) -> np.ndarray:
         return softmax_proba((D @ self.coef_.T + self.intercept_) / self.temperature)
-
-    def predict_proba(self, X: np.ndarray) -> np.ndarray:
-        return self._proba(self.descriptors(X))
-
-    def predict(self, X: np.ndarray) -> np.ndarray:
-        D = self.descriptors(X)
-        names = np.asarray(self.classes_, dtype=object)[np.argmax(self._proba(D), axis=1)]
-        names[self.novelty_head_.is_unknown(D)] = UNKNOWN
-        return names.astype(str)
-
-    def confidence(self, X: np.ndarray) -> np.ndarray:
-        """The probability of the most likely scene, in percent."""
-        return 100.0 * np.max(self.predict_proba(X), axis=1)
-
-    def novelty(self, X: np.ndarray) -> np.ndarray:
-        """Distance to the nearest scene centroid in its spreads over the rejection distance:
-        above 1 a window is unknown."""
-        head = self.novelty_head_
-        return head.nearest_scaled(self.descriptors(X)) / head.reject_distance
 
     # -- model files ------------------------------------------------------------------------
 

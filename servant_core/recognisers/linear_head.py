@@ -1,8 +1,10 @@
-"""What picture recognisers with a linear head and a novelty head do once fitted.
+"""What recognisers with a linear head and a novelty head do once fitted.
 
-A recogniser that maps pictures into a space of its own (`_space(X)`), fits a probabilistic
-head there (`head_`, a scikit-learn classifier) and one centroid per scene with its spread
-(`novelty_head_`, `SceneCentroids`) answers every question the same way: this mixin.
+A recogniser that maps windows or pictures into a space of its own (`_space(X)`), fits a
+probabilistic head there (`_proba(D)`; by default `head_`, a scikit-learn classifier) and one
+centroid per scene with its spread (`novelty_head_`, `SceneCentroids`) answers every question the
+same way: this mixin (`softbovw`, `fisher-bovw`, and `kmeans-encoder`, whose head is its own
+tempered softmax).
 """
 
 from __future__ import annotations
@@ -32,14 +34,15 @@ class LinearHeadAnswers:
         if not hasattr(self, "head_"):
             raise NotFittedError(f"this {type(self).__name__} is not fitted yet; call fit first")
 
+    def _proba(self, D: np.ndarray) -> np.ndarray:
+        return np.asarray(self.head_.predict_proba(D))
+
     def predict_proba(self, X: np.ndarray) -> np.ndarray:
-        return np.asarray(self.head_.predict_proba(self._space(X)))
+        return self._proba(self._space(X))
 
     def predict(self, X: np.ndarray) -> np.ndarray:
         D = self._space(X)
-        names = np.asarray(self.scenes_, dtype=object)[
-            np.argmax(self.head_.predict_proba(D), axis=1)
-        ]
+        names = np.asarray(self.scenes_, dtype=object)[np.argmax(self._proba(D), axis=1)]
         names[self.novelty_head_.is_unknown(D)] = UNKNOWN
         return names.astype(str)
 
@@ -49,6 +52,6 @@ class LinearHeadAnswers:
 
     def novelty(self, X: np.ndarray) -> np.ndarray:
         """Distance to the nearest scene centroid in its spreads, over the rejection distance:
-        above 1 a picture is unknown."""
+        above 1 a window or picture is unknown."""
         D = self._space(X)
         return self.novelty_head_.nearest_scaled(D) / self.novelty_head_.reject_distance
