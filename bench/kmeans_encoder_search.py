@@ -35,6 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import shared_data  # noqa: E402
 
+from servant_core.cli import library_noise_silenced  # noqa: E402
 from servant_core.evaluate import (  # noqa: E402
     AudioPlan,
     evaluate_windows,
@@ -158,4 +159,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with library_noise_silenced():  # mpg123 warns of one real MP3 on descriptor 2
+        main()

@@ -34,6 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import shared_data  # noqa: E402
 from kmeans_encoder_search import inner_plans, training_part  # noqa: E402
 
+from servant_core.cli import library_noise_silenced  # noqa: E402
 from servant_core.evaluate import LOG_EPS, AudioPlan, temporal_split  # noqa: E402
 from servant_core.library import SceneLibrary, WindowFeatures  # noqa: E402
 from servant_core.recognisers.kmeans_encoder import KMeansEncoderAcousticRecogniser  # noqa: E402
@@ -118,4 +119,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with library_noise_silenced():  # mpg123 warns of one real MP3 on descriptor 2
+        main()

@@ -23,6 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from servant_core.cli import library_noise_silenced  # noqa: E402
 from servant_core.evaluate import temporal_split  # noqa: E402
 from servant_core.library import SceneLibrary, featurize_recordings  # noqa: E402
 from servant_core.recognisers import UNKNOWN, make_recogniser  # noqa: E402
@@ -92,4 +93,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with library_noise_silenced():  # mpg123 warns of one real MP3 on descriptor 2
+        main()

@@ -52,6 +52,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import shared_data  # noqa: E402
 
+from servant_core.cli import library_noise_silenced  # noqa: E402
 from servant_core.evaluate import (  # noqa: E402
     AudioPlan,
     audio_plans,
@@ -173,6 +174,12 @@ def restricted(wf: WindowFeatures, keep: np.ndarray) -> WindowFeatures:
     )
 
 
+def with_recording_column(wf: WindowFeatures) -> WindowFeatures:
+    """The rows with their recording's number as a last column (what `Peer` groups by)."""
+    features = np.hstack([wf.features, wf.recording[:, None].astype(float)])
+    return WindowFeatures(features, wf.scenes, wf.recording, wf.position, wf.recordings)
+
+
 def protocol_plans(wf: WindowFeatures) -> list[tuple[str, np.ndarray, list[AudioPlan]]]:
     """(column name, rows kept, plans) of every protocol in the table."""
     everything = np.ones(len(wf.scenes), bool)
@@ -197,13 +204,7 @@ def audio_rows(data_root: Path, seeds: int) -> list[dict[str, Any]]:
     rows = []
     for method, wf in features.items():
         if method in PEERS:
-            wf = WindowFeatures(
-                np.hstack([wf.features, wf.recording[:, None].astype(float)]),
-                wf.scenes,
-                wf.recording,
-                wf.position,
-                wf.recordings,
-            )
+            wf = with_recording_column(wf)
             make: Callable[[int | None], Any] = PEERS[method][1]
         else:
             make = lambda seed, m=method: make_audio_recogniser(  # noqa: E731
@@ -276,4 +277,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with library_noise_silenced():  # mpg123 warns of one real MP3 on descriptor 2
+        main()

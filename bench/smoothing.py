@@ -35,6 +35,7 @@ sys.path.insert(0, str(REPO))
 
 from common import shared_data  # noqa: E402
 
+from servant_core.cli import library_noise_silenced  # noqa: E402
 from servant_core.evaluate import featurize_library_audio, temporal_split  # noqa: E402
 from servant_core.fusion.smoothing import SceneSmoother  # noqa: E402
 from servant_core.library import SceneLibrary  # noqa: E402
@@ -220,4 +221,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with library_noise_silenced():  # mpg123 warns of one real MP3 on descriptor 2
+        main()
