@@ -10,12 +10,13 @@ into one balanced accuracy per n (chance: 1 / number of scenes). The same draws 
 method: `kmeans-encoder` and the log-mel + logistic-regression peer of `bench/peers.py`.
 
     OMP_NUM_THREADS=1 python bench/recording_curve.py [--data ../shared/data] [--draws 6]
-        [--max-train 3] [--seed 0]
+        [--max-train 3] [--seed 0] [--param C=0.5 ...]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from collections.abc import Callable
@@ -84,7 +85,11 @@ def main() -> None:
     parser.add_argument("--draws", type=int, default=6, help="draws per left-out recording")
     parser.add_argument("--max-train", type=int, default=3, help="largest n")
     parser.add_argument("--seed", type=int, default=0, help="random state of the draws")
+    parser.add_argument(
+        "--param", action="append", default=[], help=f"{METHOD}'s name=value (JSON value)"
+    )
     args = parser.parse_args()
+    params = {k: json.loads(v) for k, v in (p.split("=", 1) for p in args.param)}
     library = SceneLibrary.scan(args.data / "audio" / "dev")
     encoder = make_audio_recogniser(METHOD, rate=RATE)
     features = featurize_all(library, {METHOD: encoder.featurize, PEER: PEERS[PEER][0]})
@@ -102,7 +107,7 @@ def main() -> None:
     )
     print(f"{'method':<44} " + " ".join(f"n={n:<5}" for n in plans))
     makers: dict[str, Callable[[], Any]] = {
-        METHOD: lambda: make_audio_recogniser(METHOD, rate=RATE, random_state=args.seed),
+        METHOD: lambda: make_audio_recogniser(METHOD, rate=RATE, random_state=args.seed, **params),
         PEER: lambda: PEERS[PEER][1](args.seed),
     }
     for name, make in makers.items():
