@@ -54,6 +54,8 @@ GRID: dict[str, list[Any]] = {
     "n_codewords": [32, 64, 128],
     "n_mels": [40, 64],
     "encoding_weight": [1.0, 0.5, 0.3, 0.15, 0.1, 0.05],
+    "modulation_groups": [0, 4, 8, 16],
+    "modulation_weight": [1.0, 0.5, 0.3],
 }
 FEATURE_PARAMS = ("n_mels", "frame_seconds", "fmin", "fmax", "rate")
 FOLDS = 5

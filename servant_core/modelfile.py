@@ -60,6 +60,9 @@ PARAM_LIMITS: dict[str, tuple[float, float]] = {
     "temperature": (0.1, 10.0),
     # kmeans-encoder scales the encodings' columns by it in the head (0: statistics only)
     "encoding_weight": (0.0, 10.0),
+    # kmeans-encoder: groups of bands whose envelopes it transforms (0: none), and their scale
+    "modulation_groups": (0, 64),
+    "modulation_weight": (0.0, 10.0),
     "n_colours": (1, 64),
     "size": (8, 2048),
     "cell": (1, 256),

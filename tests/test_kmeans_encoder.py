@@ -90,9 +90,13 @@ def test_two_scenes_give_scikit_learns_probabilities(trained) -> None:
     X = model.featurize(np.concatenate([scenes["low"], scenes["mid"]]))
     two = KMeansEncoderAcousticRecogniser(**SMALL, temperature=1.0)  # unsoftened
     two.fit(X, ["low"] * 6 + ["mid"] * 6)
-    # the encodings' columns (after the 3 statistics a band) enter the head scaled
+    # the modulation spectra's columns (after the 3 statistics a band) and the encodings' (the
+    # rest) enter the head scaled
     weights = np.full(two.train_descriptors_.shape[1], two.encoding_weight)
-    weights[: 3 * X.shape[-1]] = 1.0
+    statistics = 3 * X.shape[-1]
+    modulation = statistics + 5 * two.modulation_groups
+    weights[:statistics] = 1.0
+    weights[statistics:modulation] = two.modulation_weight
     reference = LogisticRegression(C=two.C, class_weight="balanced", max_iter=3000).fit(
         two.train_descriptors_ * weights, two.train_scenes_
     )
@@ -109,11 +113,11 @@ def test_encoding_weight_leans_the_head_on_the_frame_statistics(trained) -> None
         np.concatenate([scenes["low"][:3], scenes["mid"][:3]])
     )
     y = ["low"] * 3 + ["mid"] * 3
-    statistics = 3 * X.shape[-1]
+    encodings = SMALL["n_codebooks"] * SMALL["n_codewords"]
 
     def share(weight: float) -> float:
         model = KMeansEncoderAcousticRecogniser(**SMALL, encoding_weight=weight).fit(X, y)
-        return float(np.abs(model.coef_[:, statistics:]).sum() / np.abs(model.coef_).sum())
+        return float(np.abs(model.coef_[:, -encodings:]).sum() / np.abs(model.coef_).sum())
 
     assert KMeansEncoderAcousticRecogniser().encoding_weight == 0.1
     assert share(0.1) < 0.5 * share(1.0)
@@ -143,6 +147,82 @@ def test_a_model_file_saved_before_the_encoding_weight_refits_as_before(trained,
     loaded.fold_in(high, ["high"] * 3)
     kept.fold_in(high, ["high"] * 3)
     np.testing.assert_allclose(loaded.coef_, kept.coef_)
+
+
+def test_modulation_spectra_enter_the_head_scaled_and_zero_groups_leave_them_out(trained) -> None:
+    """4 groups × 5 bins of modulation spectra sit between the statistics and the encodings;
+    a small `modulation_weight` shrinks the head's weight on them, 0 groups drops them."""
+    _, scenes = trained
+    X = KMeansEncoderAcousticRecogniser(**SMALL).featurize(
+        np.concatenate([scenes["low"][:3], scenes["mid"][:3]])
+    )
+    y = ["low"] * 3 + ["mid"] * 3
+    statistics = 3 * X.shape[-1]
+    encodings = SMALL["n_codebooks"] * SMALL["n_codewords"]
+
+    def fitted(**params) -> KMeansEncoderAcousticRecogniser:
+        return KMeansEncoderAcousticRecogniser(**SMALL, **params).fit(X, y)
+
+    def share(weight: float) -> float:
+        coef = fitted(modulation_weight=weight).coef_
+        return float(np.abs(coef[:, statistics:-encodings]).sum() / np.abs(coef).sum())
+
+    default = KMeansEncoderAcousticRecogniser()
+    assert (default.modulation_groups, default.modulation_weight) == (4, 0.5)
+    assert fitted().train_descriptors_.shape[1] == statistics + 4 * 5 + encodings
+    assert fitted(modulation_groups=0).train_descriptors_.shape[1] == statistics + encodings
+    assert share(0.1) < 0.5 * share(1.0)
+    assert share(0.0) == 0.0
+    with pytest.raises(ValueError, match="modulation_weight"):
+        fitted(modulation_weight=-1.0)
+
+
+def test_a_model_file_saved_before_the_modulation_spectra_predicts_as_before(
+    trained, tmp_path
+) -> None:
+    """An older file has no modulation parameters and no modulation columns: it loads with 0
+    groups, its probabilities are those saved, and a fold-in refits as the old code did."""
+    from tests.test_modelfile import rewrite_header
+
+    _, scenes = trained
+    X = KMeansEncoderAcousticRecogniser(**SMALL).featurize(
+        np.concatenate([scenes["low"][:3], scenes["mid"][:3]])
+    )
+    y = ["low"] * 3 + ["mid"] * 3
+    old = KMeansEncoderAcousticRecogniser(**SMALL, modulation_groups=0).fit(X, y)
+    kept = load_model(save_model(tmp_path / "kept.npz", {"acoustic": old}))["acoustic"]
+    path = save_model(tmp_path / "m.npz", {"acoustic": old})
+
+    def drop(header) -> None:
+        params = header["recognisers"]["acoustic"]["params"]
+        params.pop("modulation_groups")
+        params.pop("modulation_weight")
+
+    rewrite_header(path, drop)
+    loaded = load_model(path)["acoustic"]
+    assert loaded.modulation_groups == 0
+    np.testing.assert_allclose(loaded.predict_proba(X), old.predict_proba(X))
+    high = KMeansEncoderAcousticRecogniser(**SMALL).featurize(scenes["high"][:3])
+    loaded.fold_in(high, ["high"] * 3)
+    kept.fold_in(high, ["high"] * 3)
+    np.testing.assert_allclose(loaded.coef_, kept.coef_)
+
+
+@pytest.mark.parametrize(
+    "name, value, ok",
+    [("modulation_groups", 65, False), ("modulation_groups", -1, False)]
+    + [("modulation_weight", -0.5, False), ("modulation_weight", 0.25, True)],
+)
+def test_model_file_modulation_parameters_within_limits(trained, tmp_path, name, value, ok) -> None:
+    from tests.test_modelfile import refused_in_one_line, rewrite_header
+
+    model, _ = trained
+    path = save_model(tmp_path / "m.npz", {"acoustic": model})
+    rewrite_header(path, lambda h: h["recognisers"]["acoustic"]["params"].update({name: value}))
+    if ok:
+        assert getattr(load_model(path)["acoustic"], name) == value
+    else:
+        refused_in_one_line(path, f"parameter {name} is .* outside")
 
 
 def test_one_window_a_scene_does_not_collapse(trained) -> None:

@@ -78,6 +78,16 @@ def log_mel_frames(
     return (log_energies - log_energies.mean()).astype(np.float32)
 
 
+def fft_length(rate: int, frame_seconds: float) -> int:
+    """The FFT length of `log_mel_windows`: a power of two near `frame_seconds` at `rate`."""
+    return int(2 ** round(np.log2(frame_seconds * rate)))
+
+
+def frame_rate(rate: int, frame_seconds: float) -> float:
+    """Frames a second of `log_mel_windows` (half-overlapping frames)."""
+    return rate / (fft_length(rate, frame_seconds) // 2)
+
+
 def log_mel_windows(
     windows: np.ndarray,
     rate: int,
@@ -93,7 +103,7 @@ def log_mel_windows(
     below the rate's Nyquist frequency.
     """
     windows = np.atleast_2d(np.asarray(windows, dtype=np.float32))
-    n_fft = int(2 ** round(np.log2(frame_seconds * rate)))
+    n_fft = fft_length(rate, frame_seconds)
     fmax = min(fmax, 0.475 * rate)
     return np.stack(
         [log_mel_frames(w, rate, n_fft, n_fft // 2, n_mels, fmin, fmax) for w in windows]

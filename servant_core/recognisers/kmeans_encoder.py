@@ -3,7 +3,10 @@
 1. Each 5 s window becomes log-mel frames over 60 Hz–10.5 kHz (a band every recording has,
    whatever its sample rate), with the window's mean level removed (`features.logmel`).
 2. Frame statistics: each band's mean, spread and frame-to-frame change over the window: the
-   steady colour of a place and how much it moves.
+   steady colour of a place and how much it moves. Beside them, the modulation spectra of 4
+   groups of bands (`features.modulation`): how much each group's envelope swings at 0.5–16 Hz
+   (babble's syllables, cars passing), free of level and colouration; their columns enter the
+   head scaled by `modulation_weight` (0.5), like the encodings' (4).
 3. K-Means codebooks over standardised training frames (one per ensemble member, each from its
    own random state). A frame is encoded by the triangle activation max(0, mean(z) − z_k) of its
    distances z_k to the codewords (soft: a frame between two codewords uses both), pooled over
@@ -27,11 +30,11 @@
    place heard through another microphone most of all); a temperature above 1 softens every
    probability alike and never changes a decision.
 
-`C`, `augment`, `eq_strength`, `crops`, `crop_fraction`, `n_codewords`, `n_mels` and
-`encoding_weight` are the choice of cross-validation grouped by recording inside the training
-part of the development library (`bench/kmeans_encoder_search.py`; docs/research.md, issue 11),
-and `temperature` that of the same folds' log loss (`bench/kmeans_encoder_temperature.py`); the
-others are not.
+`C`, `augment`, `eq_strength`, `crops`, `crop_fraction`, `n_codewords`, `n_mels`,
+`encoding_weight`, `modulation_groups` and `modulation_weight` are the choice of cross-validation
+grouped by recording inside the training part of the development library
+(`bench/kmeans_encoder_search.py`; docs/research.md, issue 11), and `temperature` that of the
+same folds' log loss (`bench/kmeans_encoder_temperature.py`); the others are not.
 """
 
 from __future__ import annotations
@@ -44,7 +47,8 @@ from sklearn.cluster import KMeans
 from sklearn.exceptions import NotFittedError
 from sklearn.linear_model import LogisticRegression
 
-from servant_core.features.logmel import DEFAULT_FMAX, DEFAULT_FMIN, log_mel_windows
+from servant_core.features.logmel import DEFAULT_FMAX, DEFAULT_FMIN, frame_rate, log_mel_windows
+from servant_core.features.modulation import modulation_spectrum
 from servant_core.recognisers.base import PERCENT, check_training_scenes, init_params
 from servant_core.recognisers.centroids import SceneCentroids
 from servant_core.recognisers.linear_head import LinearHeadAnswers
@@ -58,9 +62,19 @@ TEMPERATURE = 2.0
 # The scale of the encodings' columns against the frame statistics' in the head (module
 # docstring, 4): chosen by the parameter search's folds inside the training data.
 ENCODING_WEIGHT = 0.1
+# The modulation spectra (module docstring, 2): groups of bands, and their columns' scale in the
+# head; chosen by the parameter search's folds inside the training data.
+MODULATION_GROUPS = 4
+MODULATION_WEIGHT = 0.5
 # Parameters a model file saved before they existed lacks, at the value that reproduces how that
-# model behaved (not today's default): its probabilities stay as they were.
-LEGACY_PARAMS: dict[str, Any] = {"temperature": 1.0, "encoding_weight": 1.0}
+# model behaved (not today's default): its probabilities stay as they were (0 modulation groups:
+# no modulation columns).
+LEGACY_PARAMS: dict[str, Any] = {
+    "temperature": 1.0,
+    "encoding_weight": 1.0,
+    "modulation_groups": 0,
+    "modulation_weight": 1.0,
+}
 
 
 def frame_statistics(frames: np.ndarray) -> np.ndarray:
@@ -134,6 +148,8 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         reject_margin: float = 1.7,
         temperature: float = TEMPERATURE,
         encoding_weight: float = ENCODING_WEIGHT,
+        modulation_groups: int = MODULATION_GROUPS,
+        modulation_weight: float = MODULATION_WEIGHT,
         random_state: int | None = 0,
     ) -> None:
         self.rate = rate
@@ -154,6 +170,8 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         self.reject_margin = reject_margin
         self.temperature = temperature
         self.encoding_weight = encoding_weight
+        self.modulation_groups = modulation_groups
+        self.modulation_weight = modulation_weight
         self.random_state = random_state
 
     def params(self) -> dict[str, Any]:
@@ -173,6 +191,10 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
             raise ValueError(f"temperature must be above 0, not {self.temperature!r}")
         if not self.encoding_weight >= 0:
             raise ValueError(f"encoding_weight must be 0 or above, not {self.encoding_weight!r}")
+        if not self.modulation_weight >= 0:
+            raise ValueError(
+                f"modulation_weight must be 0 or above, not {self.modulation_weight!r}"
+            )
         X = np.asarray(X, dtype=np.float32)
         scenes_arr = np.asarray(scenes).astype(str)
         rng = np.random.default_rng(self.random_state)
@@ -231,9 +253,12 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
 
     def _column_weights(self) -> np.ndarray:
         """Each descriptor column's scale in the head: 1 for the frame statistics,
-        `encoding_weight` for the encodings."""
+        `modulation_weight` for the modulation spectra, `encoding_weight` for the encodings."""
         weights = np.full(self.train_descriptors_.shape[1], float(self.encoding_weight))
-        weights[: 3 * self.frame_mean_.shape[0]] = 1.0
+        statistics = 3 * self.frame_mean_.shape[0]
+        encodings = self.codebooks_.shape[0] * self.codebooks_.shape[1]
+        weights[:statistics] = 1.0
+        weights[statistics : weights.shape[0] - encodings] = self.modulation_weight
         return weights
 
     def _fit_head(self) -> None:
@@ -265,10 +290,14 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
     # -- describing and deciding ------------------------------------------------------------
 
     def describe(self, X: np.ndarray) -> np.ndarray:
-        """Frame statistics beside every codebook's triangle encoding, before standardising."""
+        """Frame statistics, the modulation spectra (none with 0 `modulation_groups`) and every
+        codebook's triangle encoding, before standardising."""
         frames = np.asarray(X, dtype=np.float32)
         standard = (frames - self.frame_mean_) / self.frame_scale_
         parts = [frame_statistics(frames)]
+        if self.modulation_groups:
+            rate = frame_rate(self.rate, self.frame_seconds)
+            parts.append(modulation_spectrum(frames, rate, self.modulation_groups))
         parts += [triangle_encoding(standard, codebook) for codebook in self.codebooks_]
         return np.concatenate(parts, axis=1)
 
