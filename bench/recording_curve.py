@@ -19,7 +19,9 @@ import argparse
 import json
 import sys
 import time
+from collections import Counter
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import shared_data  # noqa: E402
-from peers import PEERS, RATE, featurize_all, restricted, with_recording_column  # noqa: E402
+from peers import PEERS, RATE, featurize_all, with_recording_column  # noqa: E402
 
 from servant_core.cli import library_noise_silenced  # noqa: E402
 from servant_core.library import SceneLibrary, WindowFeatures  # noqa: E402
@@ -59,17 +61,14 @@ def draws_of(
 
 
 def curve(
-    wf: WindowFeatures,
-    plan_of: Callable[[int], list[tuple[int, list[int]]]],
-    make: Callable[[], Any],
-    max_train: int,
+    wf: WindowFeatures, plans: dict[int, list[tuple[int, list[int]]]], make: Callable[[], Any]
 ) -> list[float]:
-    """Pooled balanced accuracy for n = 1 … max_train."""
+    """Pooled balanced accuracy of each n's plan."""
     figures = []
-    for n in range(1, max_train + 1):
+    for plan in plans.values():
         truth: list[str] = []
         said: list[str] = []
-        for left_out, train in plan_of(n):
+        for left_out, train in plan:
             fit_rows = np.isin(wf.recording, train)
             test_rows = wf.recording == left_out
             model = make().fit(wf.features[fit_rows], wf.scenes[fit_rows])
@@ -91,12 +90,13 @@ def main() -> None:
     args = parser.parse_args()
     params = {k: json.loads(v) for k, v in (p.split("=", 1) for p in args.param)}
     library = SceneLibrary.scan(args.data / "audio" / "dev")
+    counts = Counter(r.scene for r in library.recordings)
+    scenes = sorted(s for s, c in counts.items() if c > args.max_train)
+    # Only the recordings of those scenes are read and featurised.
+    library = replace(library, recordings=[r for r in library.recordings if r.scene in scenes])
     encoder = make_audio_recogniser(METHOD, rate=RATE)
     features = featurize_all(library, {METHOD: encoder.featurize, PEER: PEERS[PEER][0]})
     wf = features[METHOD]
-    counts = {s: len(set(wf.recording[wf.scenes == s].tolist())) for s in set(wf.scenes)}
-    scenes = sorted(s for s, c in counts.items() if c > args.max_train)
-    keep = np.isin(wf.scenes, scenes)
     plans = {
         n: draws_of(wf, scenes, n, args.draws, np.random.default_rng([args.seed, n]))
         for n in range(1, args.max_train + 1)
@@ -113,7 +113,7 @@ def main() -> None:
     for name, make in makers.items():
         part = with_recording_column(features[name]) if name == PEER else features[name]
         start = time.perf_counter()
-        figures = curve(restricted(part, keep), plans.__getitem__, make, args.max_train)
+        figures = curve(part, plans, make)
         print(
             f"{name:<44} "
             + " ".join(f"{f:<7.3f}" for f in figures)
