@@ -91,7 +91,9 @@ class ServantApp(App[None]):
         self.library_root = (
             library_root or getattr(engine, "library_root", None) or default_library_root()
         )
-        self._settings = settings
+        # the settings the engine runs on (with `servant run`'s overrides), else loaded from the
+        # file by the first screen that needs them
+        self._settings = settings or getattr(engine, "user_settings", None)
         self.arm_state: ArmState | None = None
         self.seen_scenes: set[str] = set()
         self.live = LiveScreen(sample_senses=getattr(engine, "sample_senses", ()))

@@ -127,3 +127,33 @@ async def test_teach_two_scenes_retrain_arm_and_the_arm_takes_the_taught_pose(
         if player is not None:
             player.kill()
         emulator.stop()
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("screen", ["t", "s"])
+async def test_the_arm_named_by_servant_run_port_stays_attached_after_teach_or_settings(
+    tmp_path, screen
+):
+    """`servant run --port P` with an empty config dir: opening teach mode or the Settings
+    screen (both read the user's settings) must not put the settings file's arm (none) in place
+    of the one the command line named."""
+    from servant_core.cli import build_parser
+
+    emulator, port = start_emulator("maestro")
+    args = build_parser().parse_args(["run", "--port", port, "--no-mic", "--no-camera"])
+    engine = build_run_engine(args)
+    app = ServantApp(engine)
+    try:
+        async with app.run_test(size=(120, 40)) as pilot:
+            await wait(pilot, lambda: app.arm_state is not None and app.arm_state.connected, 20)
+            await pilot.press(screen)
+            await wait(pilot, lambda: app.screen is not app.live, 10)
+            await pilot.pause(1.0)  # the settings reach the engine in a worker
+            await pilot.press("escape")
+            await wait(pilot, lambda: app.screen is app.live, 10)
+            await pilot.pause(1.0)
+            assert engine.status["servo"].ok, engine.status["servo"].message
+            assert app.arm_state is not None and app.arm_state.connected
+    finally:
+        engine.stop()
+        emulator.stop()

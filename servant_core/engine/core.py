@@ -191,6 +191,9 @@ class Engine:
         self._scores.update({SENSES[sense].role: {} for sense in self.samples})
         self._unknowns = Unknowns()
         self.sensor_port: str | None = None  # the settings' board the senses were opened on
+        # the user's settings the engine was built on, the command line's overrides applied (a
+        # front end starts from these, not from the file: `servant run --port P` keeps P)
+        self.user_settings: Any = None
         self._sensor_port_told: str | None = None
 
     # --- subscribers and status -------------------------------------------------------------

@@ -226,6 +226,7 @@ def build_live_engine(
             "in the library (l, R) or `servant train --learned-fusion` teaches it"
         )
     engine.sensor_port = user.sensor_port
+    engine.user_settings = settings.user
     engine.connect_arm(user.serial_port, user.protocol, user.joints)
     learner_file = Path(settings.learner or default_learner_path())
     if settings.learner is not None or learner_file.is_file():
