@@ -256,12 +256,31 @@ def test_registered_and_unfitted_raises() -> None:
         model.predict(np.zeros((1, 10, 40), np.float32))
 
 
+# A small fixed subset of the real recordings: the first recording (by name) of each scene that
+# has three or more. The whole library (84 recordings) and its targets are measured by
+# bench/few_shot.py, not here: a test reads a few recordings, a bench all of them.
+FEW_SHOT_SUBSET = {
+    "beach": ["dusktide-cast-beach.mp3"],
+    "cafe": ["audio-ambient-cafe.mp3"],
+    "construction": ["citysoundscape-fro-construction-sound.mp3"],
+    "crowd": ["audio-ambient-baseball-stadium-background.mp3"],
+    "library": ["codingweb-library.mp3"],
+    "office": ["csesoc-hackathon-c-office.mp3"],
+    "station": ["datameditation-station.mp3"],
+    "street": ["ambience-designer-street-sounds-2.mp3"],
+    "supermarket": ["datameditation-shopping.mp3"],
+    "vehicle": ["calmit-train.mp3"],
+}
+
+
 @pytest.mark.slow
-def test_few_shot_on_the_real_recordings(shared_data) -> None:
+def test_few_shot_on_the_real_recordings(shared_data, tmp_path) -> None:
     """Three windows of each real recording teach it; the later 40 % of each is recognised."""
     from servant_core.evaluate import evaluate_audio
     from servant_core.library import SceneLibrary
+    from tests.conftest import link_library
 
-    library = SceneLibrary.scan(shared_data / "audio" / "dev")
+    subset = {scene: (names, 0) for scene, names in FEW_SHOT_SUBSET.items()}
+    library = SceneLibrary.scan(link_library(tmp_path / "lib", shared_data, subset))
     result = evaluate_audio(library, "kmeans-encoder", "fewshot", shots=(3,))
     assert result["rows"][0]["balanced_accuracy"] >= 0.92  # issue 11's target (0.880 before)
