@@ -62,6 +62,7 @@ from servant_core.evaluate import (  # noqa: E402
 from servant_core.features.logmel import log_mel_frames  # noqa: E402
 from servant_core.library import SceneLibrary, WindowFeatures, iter_recording_windows  # noqa: E402
 from servant_core.recognisers import make_audio_recogniser  # noqa: E402
+from servant_core.recognisers.background import kept_out  # noqa: E402
 
 RATE = 22050
 WINDOW_SECONDS = 5.0
@@ -207,8 +208,10 @@ def audio_rows(data_root: Path, seeds: int) -> list[dict[str, Any]]:
             wf = with_recording_column(wf)
             make: Callable[[int | None], Any] = PEERS[method][1]
         else:
-            make = lambda seed, m=method: make_audio_recogniser(  # noqa: E731
-                m, **seeded_params({"rate": RATE}, m, "audio", seed)
+            # no recording of the library is also "somewhere else" (its background)
+            make = lambda seed, m=method: kept_out(  # noqa: E731
+                make_audio_recogniser(m, **seeded_params({"rate": RATE}, m, "audio", seed)),
+                library.recordings,
             )
         for column, keep, plans in protocol_plans(wf):
             start = time.perf_counter()

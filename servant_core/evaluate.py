@@ -48,6 +48,8 @@ from servant_core.recognisers import (
     make_recogniser,
     methods_for,
 )
+from servant_core.recognisers.background import kept_out
+from servant_core.recognisers.base import open_probabilities
 
 PROTOCOLS = ("temporal", "recording", "fewshot")
 DEFAULT_SHOTS = (1, 2, 3, 5, 10)
@@ -355,7 +357,10 @@ def evaluate_audio(
         wf,
         names,
         plans,
-        lambda seed: make_audio_recogniser(method, **seeded_params(params, method, "audio", seed)),
+        lambda seed: kept_out(
+            make_audio_recogniser(method, **seeded_params(params, method, "audio", seed)),
+            wf.recordings,
+        ),
         seeds,
     )
     for row in rows:
@@ -531,9 +536,10 @@ def run_fusion(
 
 
 def said_of(model: Recogniser, X: np.ndarray) -> list[Said]:
-    """Each row's opinion: scene, confidence and probability per scene."""
+    """Each row's opinion: scene, confidence and probability per scene (and not somewhere
+    else, where the recogniser knows somewhere else)."""
     scenes, confidences = model.predict(X), model.confidence(X)
-    proba = model.predict_proba(X)
+    proba = open_probabilities(model, X)
     return [
         (
             str(scenes[i]),

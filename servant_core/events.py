@@ -91,7 +91,7 @@ class Decision:
 
     t: float
     scene: str | None  # None: "No scene detected"
-    confidence: float  # average of the acoustic and visual confidences; 0.0 when no scene
+    confidence: float  # average of the two senses' confidences (see `not_elsewhere`); 0.0: none
     line: str  # "CoffeeScene detected" / "No scene detected"
     acoustic_confidence: float = 0.0
     visual_confidence: float = 0.0
@@ -101,6 +101,9 @@ class Decision:
     # The senses the decision leaned on, most first (the learned fusion says; the rule
     # policies leave it empty).
     leaned_on: tuple[str, ...] = ()
+    # True when `confidence` is the probability of this place and not somewhere else, from the
+    # senses together (`fusion.elsewhere`), rather than an average of their confidences.
+    not_elsewhere: bool = False
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from servant_core.cli import main
-from tests.conftest import REPO, link_library
+from tests.conftest import REPO, link_library, servant
 
 SMALL = {
     "cafe": (["moodist-crowded-bar.mp3"], 12),
@@ -159,3 +159,29 @@ def test_console_script_lists_subcommands():
     ).stdout
     for command in ("train", "predict", "eval", "table"):
         assert command in out
+
+
+TWO_PLACES = {
+    "cafe": (["audio-ambient-cafe.mp3"], 6),
+    "street": (["audio-ambient-city.mp3"], 6),
+}
+
+
+def test_predict_says_an_unknown_place_at_a_building_site(shared_data, tmp_path):
+    """Two places taught (the default methods, as `servant train` fits them); a real recording
+    of a place never taught, from another source, is said to be an unknown place, window after
+    window, and a taught place is named with its probability of being here and not elsewhere."""
+    library = link_library(tmp_path / "lib", shared_data, TWO_PLACES)
+    model = tmp_path / "model.npz"
+    trained = servant("train", str(library), "-o", str(model))
+    assert trained.returncode == 0, trained.stderr
+    site = shared_data / "audio/dev/construction/relaxandsleep-construction-site.mp3"
+    result = servant("predict", str(model), "--audio", str(site))
+    assert result.returncode == 0, result.stderr
+    windows = [line for line in result.stdout.splitlines() if line.startswith("Acoustic window")]
+    unknown = [line for line in windows if line.endswith("an unknown place")]
+    assert len(windows) >= 10 and len(unknown) >= 0.9 * len(windows), result.stdout
+    cafe = shared_data / "audio/dev/cafe/audio-ambient-cafe.mp3"
+    result = servant("predict", str(model), "--audio", str(cafe), "--json")
+    said = json.loads(result.stdout)["acoustic"]
+    assert np.mean([w["scene"] == "cafe" and w["confidence"] >= 50 for w in said]) >= 0.9

@@ -367,6 +367,7 @@ def test_an_unknown_place_heard_labelled_and_folded_in_is_then_recognised(shared
         spectrum_fps=0,
         library_root=root,
         model_path=model_file,
+        ask_after_s=5.0,  # asked at the first unknown window (the 30 s hold has its own test)
     )
     events = collect(engine)
     engine.run_until(21.0)  # four windows

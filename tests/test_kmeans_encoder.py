@@ -88,7 +88,8 @@ def test_probabilities_sum_to_one_and_favour_the_truth(trained) -> None:
 def test_two_scenes_give_scikit_learns_probabilities(trained) -> None:
     model, scenes = trained
     X = model.featurize(np.concatenate([scenes["low"], scenes["mid"]]))
-    two = KMeansEncoderAcousticRecogniser(**SMALL, temperature=1.0)  # unsoftened
+    # unsoftened, and no background: two classes, as scikit-learn keeps them
+    two = KMeansEncoderAcousticRecogniser(**SMALL, temperature=1.0, background=False)
     two.fit(X, ["low"] * 6 + ["mid"] * 6)
     # the encodings' columns (after the 3 statistics a band) enter the head scaled
     weights = np.full(two.train_descriptors_.shape[1], two.encoding_weight)

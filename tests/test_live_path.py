@@ -335,3 +335,64 @@ def test_an_armed_arm_whose_controller_vanishes_while_still_is_shown_disarmed(em
         assert any(isinstance(e, ArmState) and not e.armed for e in events)
     finally:
         engine.stop()
+
+
+def picture_video(paths: list[Path], path: Path) -> Path:
+    """A video file of real pictures, two a second: the camera."""
+    from servant_core.library import read_picture
+
+    frames = [read_picture(p) for p in paths]
+    height, width = frames[0].shape[:2]
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 2.0, (width, height))
+    for frame in frames:
+        writer.write(cv2.resize(frame, (width, height)))
+    writer.release()
+    return path
+
+
+def test_servant_run_headless_at_a_place_never_taught_keeps_the_arm_still(
+    tmp_path,
+    virtual_mic,
+    emulator,  # noqa: F811
+    shared_data,
+):
+    """A café and a street taught from real recordings and pictures (Servant's default
+    methods); the wearer walks onto a building site: a real recording of one played into the
+    microphone, real pictures of a boxing gym as the camera. `servant run --headless --arm`
+    says it is an unknown place, asks what it is once the place has held 30 s, decides nothing
+    and leaves the armed arm where it was."""
+    from servant_core.audio import read_audio
+    from tests.conftest import link_library
+    from tests.test_cli_recognition import TWO_PLACES
+
+    emu, port = emulator
+    library = link_library(tmp_path / "library", shared_data, TWO_PLACES)
+    model = tmp_path / "model.npz"
+    assert cli_main(["train", str(library), "-o", str(model)]) == 0
+    poses = {"cafe": POSES["coffee"], "street": POSES["street"]}
+    places = tuple(poses)
+    records = [TeachRecord(s, label_scores(s, places), poses[s], time.time()) for s in places]
+    ActionLearner(max_iter=3000).fit(records).save()
+    site = read_audio(
+        shared_data / "audio/dev/construction/relaxandsleep-construction-site.mp3", DEMO_RATE
+    )
+    sound = write_wav(tmp_path / "site.wav", site[: 50 * DEMO_RATE], DEMO_RATE)
+    gym = sorted((shared_data / "images/dev/gym").glob("*.jpg"))[:40]
+    video = picture_video(gym, tmp_path / "gym.avi")
+    player = play(sound)
+    try:
+        result = servant(
+            *["run", "--headless", "--model", str(model), "--port", port, "--arm"],
+            *["--camera", str(video), "--duration", "42"],
+        )
+    finally:
+        player.kill()
+    assert result.returncode == 0, result.stderr
+    heard = [line for line in result.stdout.splitlines() if " heard " in line]
+    assert len(heard) >= 6, result.stdout
+    assert sum("an unknown place" in line for line in heard) >= len(heard) - 1, result.stdout
+    assert "Scene detected" not in result.stdout
+    assert "unknown audio" in result.stdout  # "What is this place?" once it held 30 s
+    for joint in default_joints():  # armed at home, and never moved from there
+        expected = expected_pulse(joint.name, joint.home_angle)
+        assert emu.pulse(joint.channel) == pytest.approx(expected, abs=1.0), joint.name

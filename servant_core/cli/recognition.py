@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from collections import Counter
 from pathlib import Path
@@ -29,6 +30,7 @@ from servant_core.evaluate import (
 )
 from servant_core.event_text import confidence_text, place
 from servant_core.fusion import POLICIES, FusionConfig, LearnedFusion
+from servant_core.fusion.elsewhere import place_probability
 from servant_core.library import SceneLibrary, featurize_recordings, read_picture, read_pictures
 from servant_core.modelfile import load_model_and_fusion, save_model
 from servant_core.progress import Progress
@@ -41,6 +43,8 @@ from servant_core.recognisers import (
     make_audio_recogniser,
     make_recogniser,
 )
+from servant_core.recognisers.background import kept_out
+from servant_core.recognisers.base import knows_elsewhere, open_probabilities
 from servant_core.senses import ROLE_SENSE, SAMPLE_SENSES
 from servant_core.storage import data_dir
 
@@ -272,7 +276,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     recognisers: dict[str, Recogniser] = {}
     summary: dict[str, Any] = {"root": str(args.root), "warnings": []}
     if len({r.scene for r in library.recordings}) >= 2:
-        audio = make_audio_recogniser(args.audio_method, **_audio_params(args))
+        audio = kept_out(
+            make_audio_recogniser(args.audio_method, **_audio_params(args)), library.recordings
+        )
         wf = featurize_recordings(
             library.recordings,
             audio.featurize,
@@ -390,7 +396,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
         first_acoustic = (
             str(scenes[0]),
             float(confidences[0]),
-            dict(zip(audio.scenes_, map(float, audio.predict_proba(X)[0]), strict=True)),
+            dict(zip(audio.scenes_, map(float, open_probabilities(audio, X)[0]), strict=True)),
         )
     visual_predictions: list[Said] = []
     if args.image:
@@ -417,6 +423,16 @@ def cmd_predict(args: argparse.Namespace) -> int:
                 args.policy, config, first_acoustic[:2], [v[:2] for v in visual_predictions]
             )
         shared = decision_unit(model.get("acoustic"), model.get("visual"))
+        said = "average confidence"
+        if decision.scene is not None and knows_elsewhere(model.get("acoustic")):
+            # as the live engine and the arm: this place and not somewhere else, both senses
+            scores = {
+                "acoustic": first_acoustic[2] or {},
+                "visual": visual_predictions[-1][2] or {},
+            }
+            sure = place_probability(decision.scene, scores, ("acoustic", "visual"), {"acoustic"})
+            decision = dataclasses.replace(decision, confidence=100.0 * sure)
+            said = "sure it is here and not elsewhere"
         result["decision"] = {
             "scene": decision.scene,
             "line": decision.line,
@@ -425,7 +441,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
             "leaned_on": list(decision.leaned_on),
         }
         average = confidence_text(decision.confidence, shared)
-        lines.append(f"{decision.line} (average confidence {average})")
+        lines.append(f"{decision.line} ({said} {average})")
     emit(args, result, "\n".join(lines))
     return 0
 

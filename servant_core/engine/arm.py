@@ -9,13 +9,14 @@ seconds, so moves and heartbeats run on the arm's own single thread.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from servant_core.engine.bus import EventBus
 from servant_core.errors import ServantError
 from servant_core.events import ArmState, Notice
+from servant_core.fusion.elsewhere import place_probability
 
 Pose = Mapping[str, float]
 PoseFor = Callable[[str, dict[str, dict[str, float]], float], Pose | None]
@@ -126,17 +127,23 @@ class ArmControl:
         scores: dict[str, dict[str, float]],
         threshold: float | None,
         senses: Sequence[str] = ("acoustic", "visual"),
+        open_senses: Collection[str] = (),
+        sure: float | None = None,
     ) -> None:
         """Move to the pose taught for a decided `scene`, if armed and sure enough: `scores` are
-        the senses' latest {role: {scene: probability}}; the least sure of `senses` (the roles
-        the decision rests on) must give the scene at least `threshold` percent."""
+        the senses' latest {role: {scene: probability}}; `senses` (the roles the decision rests
+        on) together must give the scene and not somewhere else at least `threshold` percent
+        (`place_probability`: with no sense in `open_senses`, the least sure sense's share), or
+        `sure` (0–1) when the decision already says it."""
         link, pose_for, pool = self.link, self.pose_for, self._pool
         if link is None or not link.armed:
             return
         if pose_for is None:
             self.bus.emit(Notice(self.bus.clock(), NO_POSE))
             return
-        confidence = 100.0 * min(scores.get(sense, {}).get(scene, 0.0) for sense in senses)
+        if sure is None:
+            sure = place_probability(scene, scores, senses, open_senses)
+        confidence = 100.0 * sure
         if threshold is not None and confidence < threshold:
             self.bus.emit(
                 Notice(

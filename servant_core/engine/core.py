@@ -56,14 +56,26 @@ from servant_core.events import (
     VisualPrediction,
 )
 from servant_core.features.palette import dominant_colours
-from servant_core.fusion import FusionConfig, FusionPolicy, LearnedFusion, SequentialFusion
+from servant_core.fusion import (
+    FusionConfig,
+    FusionPolicy,
+    LearnedFusion,
+    ParallelFusion,
+    SequentialFusion,
+)
+from servant_core.fusion.elsewhere import elsewhere_mass, place_probability, steady_open
 from servant_core.fusion.smoothing import SceneSmoother
 from servant_core.library import SceneLibrary
 from servant_core.recognisers import FRESH_METHODS, UNKNOWN, Recogniser
+from servant_core.recognisers.base import knows_elsewhere, open_probabilities
 from servant_core.senses import SAMPLE_SENSES, SENSES
 from servant_core.storage import data_dir
 
 log = logging.getLogger(__name__)
+
+# "What is this place?" is asked once the sound has named no taught place for this long: the
+# paper's 30 s acoustic window, so a passing odd moment is never asked about.
+ASK_AFTER_S = 30.0
 
 NO_MODEL = (
     "no model yet: nothing can be recognised until two scenes are taught (teach mode, key t: "
@@ -122,6 +134,7 @@ class Engine:
         smoother: SceneSmoother | None = None,
         samples: Mapping[str, SampleSource] | None = None,
         sample_recognisers: Mapping[str, Recogniser] | None = None,
+        ask_after_s: float = ASK_AFTER_S,
     ) -> None:
         self.audio = audio
         self.camera = camera
@@ -144,6 +157,7 @@ class Engine:
         self.retrain_needed = False
         self.confidence_threshold = confidence_threshold
         self.smoother = smoother
+        self.ask_after_s = ask_after_s
 
         self._bus = EventBus(self.clock)
         self._arm = ArmControl(self._bus, reopen_seconds)
@@ -190,6 +204,8 @@ class Engine:
         self._last_named: dict[str, tuple[float, str | None]] = {}
         self._scores.update({SENSES[sense].role: {} for sense in self.samples})
         self._unknowns = Unknowns()
+        self._unknown_since: float | None = None  # since when the sound names no taught place
+        self._open_roles: set[str] = set()  # roles whose probabilities know somewhere else
         self.sensor_port: str | None = None  # the settings' board the senses were opened on
         # the user's settings the engine was built on, the command line's overrides applied (a
         # front end starts from these, not from the file: `servant run --port P` keeps P)
@@ -368,12 +384,21 @@ class Engine:
         scene, confidence, scores = _predict(acoustic, X)
         unit = acoustic.confidence_unit
         if self.smoother is not None and unit == "%":
-            scene, confidence, scores = self._smoothed(scene, scores)
+            # unknown though its probabilities name a place: far from every place taught
+            far = scene == UNKNOWN and sum(scores.values()) > 0.5
+            smoothed = self._smoothed(far, scores)
+            if knows_elsewhere(acoustic):
+                named, scores = steady_open(scores, smoothed[2], far)
+                scene = UNKNOWN if named is None else named
+                confidence = 100.0 * scores.get(named, 0.0) if named else 0.0
+            else:
+                scene, confidence, scores = smoothed
         with self._lock:
             self._scores["acoustic"] = scores
+            self._note_open("acoustic", acoustic)
         known = scene != UNKNOWN
         self._emit(AcousticPrediction(t, scene if known else None, confidence, scores, unit))
-        if not known:
+        if self._unknown_held(known, t):
             self._ask_label(Kept("audio", window, rate), scores, t)
         with self._lock:
             events = self._judged("audio", scene if known else None, confidence, t, scores)
@@ -389,6 +414,15 @@ class Engine:
         on_sense = getattr(self.fusion, "on_sense", None)
         if on_sense is not None:
             return list(on_sense(sense, scene, confidence, t, scores))
+        if isinstance(self.fusion, ParallelFusion):
+            # the pictures are evidence, not votes, once the sound knows somewhere else
+            if sense == "audio" and "acoustic" in self._open_roles:
+                elsewhere = elsewhere_mass(scores)
+                return self.fusion.on_acoustic(
+                    scene, confidence, t, scores=scores, elsewhere=elsewhere
+                )
+            if sense == "image":
+                return self.fusion.on_visual(scene, confidence, t, scores=scores)
         if sense == "audio":
             return self.fusion.on_acoustic(scene, confidence, t)
         if sense == "image":
@@ -406,6 +440,7 @@ class Engine:
         known = scene != UNKNOWN
         with self._lock:
             self._scores[SENSES[sense].role] = scores
+            self._note_open(SENSES[sense].role, recogniser)
         unit = recogniser.confidence_unit
         self._emit(SensePrediction(t, sense, scene if known else None, confidence, scores, unit))
         if not known and not self._named_elsewhere(sense, t):
@@ -428,14 +463,34 @@ class Engine:
         if self.smoother is not None:
             self.smoother.reset()
 
-    def _smoothed(
-        self, scene: str, scores: dict[str, float]
-    ) -> tuple[str, float, dict[str, float]]:
+    def _note_open(self, role: str, recogniser: Recogniser) -> None:
+        """Remember whether a role's probabilities leave room for somewhere else (under _lock)."""
+        if knows_elsewhere(recogniser):
+            self._open_roles.add(role)
+        else:
+            self._open_roles.discard(role)
+
+    def _unknown_held(self, known: bool, t: float) -> bool:
+        """Whether the sound has named no taught place for `ask_after_s` (the window ending at t
+        included): only then is the wearer asked "What is this place?", once a stay."""
+        if known:
+            self._unknown_since = None
+            return False
+        if self._unknown_since is None:
+            self._unknown_since = t - self.window_seconds
+        return t - self._unknown_since >= self.ask_after_s - 1e-6
+
+    def _smoothed(self, far: bool, scores: dict[str, float]) -> tuple[str, float, dict[str, float]]:
         """The window's judgement through the forward filter: (scene or UNKNOWN, confidence in
-        percent, {scene: probability}) of the belief after this window."""
+        percent, {scene: probability}) of the belief after this window. `far`: the window is
+        unlike every place taught; otherwise what its probabilities leave is somewhere else's."""
         assert self.smoother is not None
+        elsewhere = elsewhere_mass(scores)
+        evidence = {UNKNOWN: 1.0} if far else dict(scores)
+        if not far and elsewhere > 1e-9:
+            evidence[UNKNOWN] = elsewhere
         with self._lock:
-            belief = self.smoother.update(scores if scene != UNKNOWN else {UNKNOWN: 1.0})
+            belief = self.smoother.update(evidence)
         best = max(belief, key=lambda s: belief[s])
         return best, 100.0 * belief[best], {s: p for s, p in belief.items() if s != UNKNOWN}
 
@@ -464,6 +519,7 @@ class Engine:
         known = scene != UNKNOWN
         with self._lock:
             self._scores["visual"] = scores
+            self._note_open("visual", visual)
             events = self._judged("image", scene if known else None, confidence, t, scores)
         unit = visual.confidence_unit
         self._emit(VisualPrediction(t, scene if known else None, confidence, scores, unit))
@@ -476,19 +532,30 @@ class Engine:
 
     def _handle(self, events: list[Any]) -> None:
         for event in events:
-            if isinstance(event, Decision) and event.scene is not None:
-                with self._lock:
-                    unit = decision_unit(self.acoustic, self.visual)
-                event = dataclasses.replace(event, confidence_unit=unit)
+            if not isinstance(event, Decision) or event.scene is None:
+                self._emit(event)
+                continue
+            scene = event.scene
+            roles = tuple(SENSES[s].role for s in event.leaned_on if s in SENSES)
+            roles = roles or ("acoustic", "visual")
+            with self._lock:
+                unit = decision_unit(self.acoustic, self.visual)
+                open_roles = set(self._open_roles)
+            event = dataclasses.replace(event, confidence_unit=unit)
+            if open_roles & set(roles) and not event.not_elsewhere:
+                # the figure the log, the Scene pane and the arm's threshold share: the
+                # probability of this place and not somewhere else, from every sense
+                sure = place_probability(scene, self.latest_scores(), roles, open_roles)
+                event = dataclasses.replace(event, confidence=100.0 * sure, not_elsewhere=True)
             self._emit(event)
-            if isinstance(event, Decision) and event.scene is not None:
-                roles = tuple(SENSES[s].role for s in event.leaned_on if s in SENSES)
-                self._arm.act(
-                    event.scene,
-                    self.latest_scores(),
-                    self.confidence_threshold,
-                    roles or ("acoustic", "visual"),
-                )
+            self._arm.act(
+                scene,
+                self.latest_scores(),
+                self.confidence_threshold,
+                roles,
+                open_roles,
+                event.confidence / 100.0 if event.not_elsewhere else None,
+            )
 
     # --- the arm (see `arm.ArmControl`) -------------------------------------------------------
 
@@ -751,7 +818,7 @@ def _predict(recogniser: Recogniser, X: np.ndarray) -> tuple[str, float, dict[st
     """(scene or UNKNOWN, confidence, {scene: probability}) for a single featurized row."""
     scene = str(recogniser.predict(X)[0])
     confidence = float(recogniser.confidence(X)[0])
-    probabilities = recogniser.predict_proba(X)[0]
+    probabilities = open_probabilities(recogniser, X)[0]
     return (
         scene,
         confidence,

@@ -39,6 +39,7 @@ from servant_core.fusion.learning import (
 from servant_core.library import SampleFile, SceneLibrary, featurize_recordings, read_pictures
 from servant_core.modelfile import save_model
 from servant_core.recognisers import Recogniser, make_recogniser
+from servant_core.recognisers.background import kept_out
 from servant_core.senses import SAMPLE_SENSES, SENSES
 from servant_core.storage import atomic_write_bytes
 
@@ -153,7 +154,7 @@ def refit_audio(
         on_error=on_error,
         on_progress=on_progress,
     )
-    return model.fit(windows.features, list(windows.scenes))
+    return kept_out(model, library.recordings).fit(windows.features, list(windows.scenes))
 
 
 def refit_pictures(

@@ -19,7 +19,7 @@ import numpy as np
 from servant_core.errors import ServantError
 from servant_core.fusion.learned import FusionNet, SenseOpinions
 from servant_core.library import Picture, WindowFeatures
-from servant_core.recognisers.base import Recogniser, init_params
+from servant_core.recognisers.base import Recogniser, init_params, open_probabilities
 
 DEFAULT_FOLDS = 4
 
@@ -71,7 +71,7 @@ def held_out_opinions(
         except ServantError:
             continue
         index = [columns.index(s) for s in model.scenes_]
-        proba[np.ix_(test, index)] = model.predict_proba(X[test])
+        proba[np.ix_(test, index)] = open_probabilities(model, X[test])
         predicted[test] = model.predict(X[test])
         judged |= test
     return SenseOpinions(

@@ -9,15 +9,29 @@ picture cannot confirm a wrong sound, so two votes are enough where the sequenti
 for three in a row: a decision typically comes 5–6 s after entering a scene (bench/
 fusion_latency.py). If nothing agrees within `acoustic_window_s` of the first acoustic
 prediction, it says `No scene detected`, forgets, and goes on, as the paper's policy does.
+
+When the sound knows somewhere else (its recogniser learned a background: the engine passes its
+probabilities with `scores=` and what they leave with `elsewhere=`), the pictures are evidence
+rather than votes: the scene is decided once, with at least `votes_needed` pictures of the last
+`confirm_window_s` seen, the probability that the wearer is in it and not somewhere else, from
+the sound and those pictures' average shares (`fusion.elsewhere.place_probability`), reaches
+`OPEN_DECIDE_AT`. Pictures that cannot tell the taught places apart (two places, every picture
+50 %) then neither block a place the sound is sure of nor confirm one it is not; the decision's
+confidence is that probability, which the arm's threshold reads too.
 """
 
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Mapping
 
 from servant_core.events import Decision, FusionState
+from servant_core.fusion.elsewhere import place_probability
 from servant_core.fusion.sequential import AcousticWindow, FusionConfig, scene_line
 from servant_core.recognisers.base import UNKNOWN
+
+# A place is decided when it is likelier than not that the wearer is there and not elsewhere.
+OPEN_DECIDE_AT = 0.5
 
 
 class ParallelFusion(AcousticWindow):
@@ -39,6 +53,9 @@ class ParallelFusion(AcousticWindow):
         self.acoustic_confidence = 0.0
         self.opened_at: float | None = None  # first acoustic opinion since the last decision
         self.pictures: list[tuple[float, str, float]] = []  # (time, scene, confidence)
+        # the sound's probabilities when it knows somewhere else, and the pictures' shares
+        self.sound_scores: Mapping[str, float] | None = None
+        self.picture_scores: list[tuple[float, Mapping[str, float]]] = []
 
     def _recent(self, t: float) -> list[tuple[float, str, float]]:
         window = self.config.confirm_window_s
@@ -63,7 +80,34 @@ class ParallelFusion(AcousticWindow):
     def state(self, t: float) -> FusionState:
         return FusionState(t, self.phase, self.scene, self.seconds_left(t), len(self._recent(t)))
 
+    def _decide_open(self, t: float) -> list[Decision | FusionState]:
+        """Decide on the probability of the sound's place and not somewhere else, from the
+        sound and the recent pictures' average shares (module docstring)."""
+        window = self.config.confirm_window_s
+        seen = [scores for when, scores in self.picture_scores if t - when <= window]
+        if self.scene is None or self.sound_scores is None or len(seen) < self.votes_needed:
+            return [self.state(t)]
+        places = set().union(*seen)
+        pooled = {p: sum(s.get(p, 0.0) for s in seen) / len(seen) for p in places}
+        scores = {"acoustic": self.sound_scores, "visual": pooled}
+        sure = place_probability(self.scene, scores, ("acoustic", "visual"), {"acoustic"})
+        if sure < OPEN_DECIDE_AT:
+            return [self.state(t)]
+        decision = Decision(
+            t,
+            self.scene,
+            100.0 * sure,
+            scene_line(self.scene),
+            self.acoustic_confidence,
+            100.0 * pooled.get(self.scene, 0.0),
+            not_elsewhere=True,
+        )
+        self._restart()
+        return [decision, self.state(t)]
+
     def _decide(self, t: float) -> list[Decision | FusionState]:
+        if self.sound_scores is not None:
+            return self._decide_open(t)
         agreeing = self._agreeing(t)
         if not agreeing or self.acoustic_confidence < self.min_acoustic_confidence:
             return [self.state(t)]
@@ -84,25 +128,45 @@ class ParallelFusion(AcousticWindow):
         """Forget pictures older than `confirm_window_s`; give up on the current opinion once
         `acoustic_window_s` has passed without agreement."""
         self.pictures = self._recent(t)
+        window = self.config.confirm_window_s
+        self.picture_scores = [p for p in self.picture_scores if t - p[0] <= window]
         return super().tick(t)
 
     def on_acoustic(
-        self, scene: str | None, confidence: float, t: float
+        self,
+        scene: str | None,
+        confidence: float,
+        t: float,
+        *,
+        scores: Mapping[str, float] | None = None,
+        elsewhere: float | None = None,
     ) -> list[Decision | FusionState]:
+        """The latest window's opinion; `scores` and `elsewhere` when the sound knows somewhere
+        else (its probabilities of the taught places, and what they leave)."""
         events = self.tick(t)
         if scene is None or scene == UNKNOWN:
             self.scene, self.acoustic_confidence = None, 0.0
             return [*events, self.state(t)]
         self.scene, self.acoustic_confidence = scene, float(confidence)
+        self.sound_scores = dict(scores) if scores is not None and elsewhere is not None else None
         if self.opened_at is None:
             self.opened_at = t
         return [*events, *self._decide(t)]
 
     def on_visual(
-        self, scene: str | None, confidence: float, t: float
+        self,
+        scene: str | None,
+        confidence: float,
+        t: float,
+        *,
+        scores: Mapping[str, float] | None = None,
     ) -> list[Decision | FusionState]:
+        """A picture's opinion; `scores`, its shares among the taught places, are its evidence
+        when the sound knows somewhere else."""
         events = self.tick(t)
         self.last_picture_at = t
+        if scores:
+            self.picture_scores.append((t, dict(scores)))
         if scene is not None and scene != UNKNOWN:
             self.pictures.append((t, scene, float(confidence)))
         return [*events, *self._decide(t)]

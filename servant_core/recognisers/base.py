@@ -9,7 +9,10 @@ A recogniser is a scikit-learn-style estimator for one sense (`"audio"` or `"ima
 - `predict(X)` → str array, `UNKNOWN` where no scene can be named;
   `confidence(X)` → a number whose unit `confidence_unit` names: `PERCENT` (a probability in
   percent) or, in paper mode, the paper's formula ("eq. 1", "eq. 2"), which is no percentage;
-  `predict_proba(X)` → (n, len(scenes_)) rows summing to one.
+  `predict_proba(X)` → (n, len(scenes_)) rows summing to one: the shares among the taught
+  places. A recogniser that knows somewhere else (a background) also has `open_proba(X)`: the
+  probability of each taught place *and not somewhere else*, rows summing to at most one
+  (`open_probabilities` reads either).
 - `get_state()` → (JSON-able header, dict of arrays); `from_state(header, arrays)` rebuilds it.
   That is how models are saved without pickle (see `servant_core.modelfile`).
 """
@@ -162,6 +165,18 @@ def scene_probabilities(
     total = probs.sum(axis=1, keepdims=True)
     uniform = np.full_like(probs, 1.0 / len(scenes))
     return np.where(total > 0, probs / np.where(total > 0, total, 1.0), uniform)
+
+
+def open_probabilities(recogniser: Any, X: np.ndarray) -> np.ndarray:
+    """(n, scenes): each taught place's probability and not somewhere else, where the recogniser
+    knows somewhere else (`open_proba`); otherwise its shares among the taught places."""
+    open_proba = getattr(recogniser, "open_proba", None)
+    return np.asarray(open_proba(X) if open_proba else recogniser.predict_proba(X), dtype=float)
+
+
+def knows_elsewhere(recogniser: Any) -> bool:
+    """Whether the recogniser's `open_probabilities` leave room for somewhere else."""
+    return bool(getattr(recogniser, "knows_elsewhere", False))
 
 
 def init_params(estimator: Any) -> dict[str, Any]:

@@ -22,7 +22,13 @@
 6. Open set: one K-Means centroid per scene over the standardised descriptors with its own
    spread (`SceneCentroids`); a window farther than the rejection distance from every centroid
    is `UNKNOWN`.
-7. Calibration: the probabilities are softmax(logits / `temperature`). The head is fitted to be
+7. Somewhere else: the head has one more class, `<elsewhere>`, learned from the universal
+   background (`recognisers.background`: windows of many places Servant ships, described through
+   this model's own codebooks). Its probabilities then say how likely the wearer is in each
+   taught place *and not somewhere else* (`open_proba`), whatever the number of places taught:
+   with two places a window of a building site goes to `<elsewhere>`, not half to each place.
+   `predict_proba` stays the share among the taught places (the elsewhere column left out).
+8. Calibration: the probabilities are softmax(logits / `temperature`). The head is fitted to be
    right on the training windows and is surer than it should be on windows it never saw (a
    place heard through another microphone most of all); a temperature above 1 softens every
    probability alike and never changes a decision.
@@ -45,6 +51,7 @@ from sklearn.exceptions import NotFittedError
 from sklearn.linear_model import LogisticRegression
 
 from servant_core.features.logmel import DEFAULT_FMAX, DEFAULT_FMIN, log_mel_windows
+from servant_core.recognisers.background import ELSEWHERE, load_background
 from servant_core.recognisers.base import PERCENT, check_training_scenes, init_params
 from servant_core.recognisers.centroids import SceneCentroids
 from servant_core.recognisers.linear_head import LinearHeadAnswers
@@ -58,9 +65,15 @@ TEMPERATURE = 2.0
 # The scale of the encodings' columns against the frame statistics' in the head (module
 # docstring, 4): chosen by the parameter search's folds inside the training data.
 ENCODING_WEIGHT = 0.1
+# How much the background weighs in the head against one taught place (module docstring, 7).
+ELSEWHERE_WEIGHT = 1.0
 # Parameters a model file saved before they existed lacks, at the value that reproduces how that
 # model behaved (not today's default): its probabilities stay as they were.
-LEGACY_PARAMS: dict[str, Any] = {"temperature": 1.0, "encoding_weight": 1.0}
+LEGACY_PARAMS: dict[str, Any] = {
+    "temperature": 1.0,
+    "encoding_weight": 1.0,
+    "background": False,
+}
 
 
 def frame_statistics(frames: np.ndarray) -> np.ndarray:
@@ -134,6 +147,9 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         reject_margin: float = 1.7,
         temperature: float = TEMPERATURE,
         encoding_weight: float = ENCODING_WEIGHT,
+        background: bool = True,
+        elsewhere_weight: float = ELSEWHERE_WEIGHT,
+        background_exclude: Sequence[str] = (),
         random_state: int | None = 0,
     ) -> None:
         self.rate = rate
@@ -154,10 +170,17 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         self.reject_margin = reject_margin
         self.temperature = temperature
         self.encoding_weight = encoding_weight
+        self.background = background
+        self.elsewhere_weight = elsewhere_weight
+        self.background_exclude = background_exclude
         self.random_state = random_state
 
     def params(self) -> dict[str, Any]:
-        return init_params(self)
+        """What a model file keeps: every parameter but `background_exclude`, which says only
+        which recordings the fit kept out of the background."""
+        params = init_params(self)
+        del params["background_exclude"]
+        return params
 
     def featurize(self, windows: np.ndarray) -> np.ndarray:
         """(n, frames, n_mels) level-free log-mel frames of (n, samples) windows at `rate`."""
@@ -200,11 +223,20 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         self.descriptor_mean_ = D.mean(axis=0)
         self.descriptor_scale_ = np.maximum(spread, SCALE_FLOOR * np.median(spread) + 1e-12)
         self.train_descriptors_ = self._standardise(D)
+        self.background_descriptors_ = self._background_descriptors()
         copies = len(D) // len(X)
         self.train_scenes_ = np.tile(scenes_arr, copies)
         self.train_derived_ = np.arange(len(D)) >= len(X)
         self._fit_heads()
         return self
+
+    def _background_descriptors(self) -> np.ndarray:
+        """The universal background through this model's codebooks (empty without one: the
+        parameter is off, no background file, or it was made with another featurizer)."""
+        found = load_background(self.params(), self.background_exclude) if self.background else None
+        if found is None or not len(found.frames):
+            return np.empty((0, self.train_descriptors_.shape[1]))
+        return self._standardise(self.describe(found.frames).astype(np.float64))
 
     def _crops(self, frames: np.ndarray) -> list[np.ndarray]:
         """`crops` evenly spaced parts of the windows, each `crop_fraction` of a window long: with
@@ -237,18 +269,28 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         return weights
 
     def _fit_head(self) -> None:
-        # Scenes come with very different numbers of windows; each weighs the same.
+        # Scenes come with very different numbers of windows; each weighs the same, and so does
+        # the background (one more class, `<elsewhere>`).
         head = LogisticRegression(C=self.C, class_weight="balanced", max_iter=3000)
         weights = self._column_weights()
-        head.fit(self.train_descriptors_ * weights, self.train_scenes_)
-        self.classes_ = [str(c) for c in head.classes_]
+        rows = np.vstack([self.train_descriptors_, self.background_descriptors_])
+        labels = np.concatenate(
+            [self.train_scenes_, np.full(len(self.background_descriptors_), ELSEWHERE)]
+        )
+        sample_weight = np.ones(len(rows))
+        sample_weight[len(self.train_descriptors_) :] = self.elsewhere_weight
+        head.fit(rows * weights, labels, sample_weight=sample_weight)
+        classes = [str(c) for c in head.classes_]
         # The weights folded into the coefficients: the head reads standardised descriptors.
         coef, intercept = head.coef_ * weights, head.intercept_
-        if len(self.classes_) == 2:  # scikit-learn keeps one weight vector for two classes
+        if len(classes) == 2:  # scikit-learn keeps one weight vector for two classes
             coef = np.vstack([-coef / 2, coef / 2])
             intercept = np.array([-intercept[0] / 2, intercept[0] / 2])
-        self.coef_ = coef
-        self.intercept_ = intercept
+        taught = np.array([c != ELSEWHERE for c in classes])
+        self.classes_ = [c for c in classes if c != ELSEWHERE]
+        self.coef_, self.intercept_ = coef[taught], intercept[taught]
+        self.elsewhere_coef_ = coef[~taught].reshape(-1, coef.shape[1])
+        self.elsewhere_intercept_ = intercept[~taught]
 
     def fold_in(self, X: np.ndarray, scenes: Sequence[str]) -> Self:
         """Add windows with confirmed labels: both heads are refitted on the stored training
@@ -294,6 +336,18 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
     def _proba(self, D: np.ndarray) -> np.ndarray:
         return softmax_proba((D @ self.coef_.T + self.intercept_) / self.temperature)
 
+    @property
+    def knows_elsewhere(self) -> bool:
+        return len(self.elsewhere_coef_) > 0
+
+    def _open_proba(self, D: np.ndarray) -> np.ndarray:
+        """(n, scenes): the probability of each taught place and not somewhere else; the rest
+        of each row is `<elsewhere>`'s (none without a background)."""
+        coef = np.vstack([self.coef_, self.elsewhere_coef_])
+        intercept = np.concatenate([self.intercept_, self.elsewhere_intercept_])
+        proba = softmax_proba((D @ coef.T + intercept) / self.temperature)
+        return proba[:, : len(self.classes_)]
+
     # -- model files ------------------------------------------------------------------------
 
     def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -316,6 +370,9 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
             "train_descriptors": self.train_descriptors_.astype(np.float32),
             "train_scenes": self.train_scenes_.astype(str),
             "train_derived": self.train_derived_,
+            "background_descriptors": self.background_descriptors_.astype(np.float32),
+            "elsewhere_coef": self.elsewhere_coef_,
+            "elsewhere_intercept": self.elsewhere_intercept_,
             **{f"novelty_{k}": v for k, v in novelty_arrays.items()},
         }
         return header, arrays
@@ -334,6 +391,17 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         model.train_descriptors_ = np.asarray(arrays["train_descriptors"], dtype=np.float64)
         model.train_scenes_ = np.asarray(arrays["train_scenes"]).astype(str)
         model.train_derived_ = np.asarray(arrays["train_derived"], dtype=bool)
+        width = model.train_descriptors_.shape[1]
+        # a model file saved before the background had none: nothing is "somewhere else"
+        model.background_descriptors_ = np.asarray(
+            arrays.get("background_descriptors", np.empty((0, width))), dtype=np.float64
+        )
+        model.elsewhere_coef_ = np.asarray(
+            arrays.get("elsewhere_coef", np.empty((0, width))), dtype=np.float64
+        )
+        model.elsewhere_intercept_ = np.asarray(
+            arrays.get("elsewhere_intercept", np.empty(0)), dtype=np.float64
+        )
         prefixed = {k[len("novelty_") :]: v for k, v in arrays.items() if k.startswith("novelty_")}
         model.novelty_head_ = SceneCentroids.from_state(header["novelty"], prefixed)
         return model

@@ -37,18 +37,38 @@ class LinearHeadAnswers:
     def _proba(self, D: np.ndarray) -> np.ndarray:
         return np.asarray(self.head_.predict_proba(D))
 
+    @property
+    def knows_elsewhere(self) -> bool:
+        """Whether `open_proba` leaves room for somewhere else (a head with a background)."""
+        return False
+
+    def _open_proba(self, D: np.ndarray) -> np.ndarray:
+        """The probability of each taught place and not somewhere else: a head that knows no
+        somewhere else (no background) has only the shares among the taught places."""
+        return self._proba(D)
+
     def predict_proba(self, X: np.ndarray) -> np.ndarray:
         return self._proba(self._space(X))
 
+    def open_proba(self, X: np.ndarray) -> np.ndarray:
+        """(n, scenes) rows summing to at most one; the rest is the probability that the window
+        or picture comes from a place not taught."""
+        return self._open_proba(self._space(X))
+
     def predict(self, X: np.ndarray) -> np.ndarray:
+        """The likeliest taught place; `UNKNOWN` where the row is far from every place taught
+        (the novelty head) or where it more likely comes from somewhere else than from any
+        taught place (somewhere else has half the probability or more)."""
         D = self._space(X)
+        open_proba = self._open_proba(D)
         names = np.asarray(self.scenes_, dtype=object)[np.argmax(self._proba(D), axis=1)]
-        names[self.novelty_head_.is_unknown(D)] = UNKNOWN
+        elsewhere = open_proba.sum(axis=1) <= 0.5
+        names[self.novelty_head_.is_unknown(D) | elsewhere] = UNKNOWN
         return names.astype(str)
 
     def confidence(self, X: np.ndarray) -> np.ndarray:
-        """The probability of the most likely scene, in percent."""
-        return 100.0 * np.max(self.predict_proba(X), axis=1)
+        """The probability of the likeliest taught place and not somewhere else, in percent."""
+        return 100.0 * np.max(self.open_proba(X), axis=1)
 
     def novelty(self, X: np.ndarray) -> np.ndarray:
         """Distance to the nearest scene centroid in its spreads, over the rejection distance:

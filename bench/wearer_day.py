@@ -1,0 +1,359 @@
+"""A wearer's day: a few places taught in teach mode, then a walk, through the live engine.
+
+For each library size (2, 3 and 5 places) and each draw, places are drawn among the scenes that
+have both recordings and pictures in `../shared/data`; each is taught as teach mode does: the
+first `--shots` windows (5 s each) of one of its recordings and `--pictures` of its pictures.
+The recognisers are Servant's defaults (`kmeans-encoder`, `fisher-bovw`), fitted as a retrain
+fits them. Then the wearer walks through stays of `--stay` seconds, in a random order:
+
+- taught, same microphone: later windows of the taught recordings, with other pictures of the
+  place's kind (never the taught ones);
+- taught kind, another recording: the other recordings of the taught scenes;
+- untaught: every recording of every scene not taught (beach, church, construction, crowd,
+  forest, laundry, market, park and the picture scenes not drawn), with pictures of a picture
+  scene not taught (gym has pictures and no recording: never taught).
+
+The walk runs through the real `Engine` on a manual clock: the sound as 5 s windows from a
+replayed recording, the camera as the stay's pictures every 2 s, the default fusion policy
+(parallel), the live smoothing, the user's default confidence threshold (50 %), and an armed
+arm. The arm is the one stand-in: a link object that is always armed and records each pose it is
+sent (the serial path itself is tested on the emulator's pty in tests/test_live_path.py).
+
+Recordings of the universal background (`moodist-*`, `servant_core/recognisers/background.py`)
+are never taught and never walked through in the main figures: a place Servant ships as
+"somewhere else" would flatter it. They are walked through separately, as "untaught, in the
+background", for information.
+
+Per library size it prints: the share of windows with a right move, a wrong move or none (by
+kind of stay), wrong moves per hour of walking, seconds to the first right move in a taught
+stay, and the share of untaught stays in which "What is this place?" was asked (and of taught
+stays, where it should not be).
+
+    OMP_NUM_THREADS=1 python bench/wearer_day.py [--sizes 2,3,5] [--draws 3] [--json FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench.common import shared_data  # noqa: E402
+from servant_core.audio import read_audio  # noqa: E402
+from servant_core.capture.replay import Clip, PacedAudio  # noqa: E402
+from servant_core.capture.source import ManualClock  # noqa: E402
+from servant_core.cli import library_noise_silenced  # noqa: E402
+from servant_core.engine.core import Engine  # noqa: E402
+from servant_core.engine.factories import live_policy, steady  # noqa: E402
+from servant_core.events import UnknownScene  # noqa: E402
+from servant_core.fusion.sequential import FusionConfig  # noqa: E402
+from servant_core.library import read_picture  # noqa: E402
+from servant_core.recognisers import FRESH_METHODS, make_recogniser  # noqa: E402
+from servant_core.settings import Settings  # noqa: E402
+
+BACKGROUND_PREFIX = "moodist-"
+WINDOW_S = 5.0
+
+
+@dataclass
+class Stay:
+    kind: str  # "taught", "taught kind", "untaught", "untaught, in the background"
+    truth: str | None  # the taught place it is, None when untaught
+    windows: np.ndarray  # (n, samples) at the model's rate
+    pictures: list[np.ndarray]
+
+
+class WalkCamera:
+    """The pictures of the stay the walk is in, one after another as the engine asks."""
+
+    name = "walk camera"
+
+    def __init__(self, clock: ManualClock, stays: list[Stay]) -> None:
+        self.clock = clock
+        self.ends = np.cumsum([len(s.windows) * WINDOW_S for s in stays])
+        self.stays = stays
+        self.shown = 0
+
+    def open(self) -> None:
+        pass
+
+    def read(self) -> np.ndarray:
+        index = min(int(np.searchsorted(self.ends, self.clock(), side="right")), len(self.ends) - 1)
+        pictures = self.stays[index].pictures
+        self.shown += 1
+        return pictures[self.shown % len(pictures)]
+
+    def close(self) -> None:
+        pass
+
+
+class RecordingLink:
+    """Stands in for the servo link: always armed, keeps each pose it is sent with the time."""
+
+    armed = True
+
+    def __init__(self, clock: ManualClock) -> None:
+        self.clock = clock
+        self.moves: list[tuple[float, str]] = []
+
+    def move_to(self, pose: dict[str, str]) -> None:
+        self.moves.append((self.clock(), pose["place"]))
+
+    def status(self) -> None:
+        return None
+
+    def read_positions(self) -> None:
+        return None
+
+
+class Data:
+    """The real recordings (their first windows, decoded once) and pictures, by scene."""
+
+    def __init__(self, root: Path, rate: int, max_windows: int) -> None:
+        self.rate = rate
+        samples = int(rate * WINDOW_S)
+        self.recordings: dict[str, list[tuple[str, np.ndarray]]] = defaultdict(list)
+        for path in sorted((root / "audio" / "dev").glob("*/*")):
+            audio = read_audio(path, rate)
+            n = min(len(audio) // samples, max_windows)
+            if n >= 2:
+                windows = audio[: n * samples].reshape(n, samples)
+                self.recordings[path.parent.name].append((path.name, windows))
+        self.pictures = {
+            folder.name: sorted(folder.glob("*.jpg"))
+            for folder in sorted((root / "images" / "dev").iterdir())
+        }
+        self.both = sorted(
+            s
+            for s in self.pictures
+            if len([r for r in self.recordings.get(s, []) if not in_background(r[0])]) >= 1
+        )
+
+
+def in_background(name: str) -> bool:
+    return name.startswith(BACKGROUND_PREFIX)
+
+
+def pictures_of(paths: list[Path], rng: np.random.Generator, n: int) -> list[np.ndarray]:
+    chosen = rng.choice(len(paths), min(n, len(paths)), replace=False)
+    return [read_picture(paths[i]) for i in chosen]
+
+
+def plan_walk(data: Data, n_places: int, args: Any, rng: np.random.Generator) -> dict[str, Any]:
+    """Draw the taught places and their teach-mode library, and the walk's stays."""
+    taught = sorted(rng.choice(data.both, n_places, replace=False).tolist())
+    stay_windows = int(round(args.stay / WINDOW_S))
+    audio_X, audio_y, picture_X, picture_y = [], [], [], []
+    stays: list[Stay] = []
+    untaught_pictures = [s for s in data.pictures if s not in taught]
+    for scene in taught:
+        own = [r for r in data.recordings[scene] if not in_background(r[0])]
+        name, windows = own[rng.integers(len(own))]
+        audio_X.append(windows[: args.shots])
+        audio_y += [scene] * len(windows[: args.shots])
+        order = rng.permutation(len(data.pictures[scene]))
+        paths = [data.pictures[scene][i] for i in order]
+        picture_X += [read_picture(p) for p in paths[: args.pictures]]
+        picture_y += [scene] * args.pictures
+        later_paths = paths[args.pictures :]
+        later = windows[args.shots :]
+        for start in range(0, len(later) - stay_windows + 1, stay_windows):
+            stays.append(
+                Stay(
+                    "taught",
+                    scene,
+                    later[start : start + stay_windows],
+                    pictures_of(later_paths, rng, 8),
+                )
+            )
+        for other, other_windows in own:
+            if other != name and len(other_windows) >= stay_windows:
+                stays.append(
+                    Stay(
+                        "taught kind",
+                        scene,
+                        other_windows[:stay_windows],
+                        pictures_of(later_paths, rng, 8),
+                    )
+                )
+    for scene, recordings in data.recordings.items():
+        if scene in taught:
+            continue
+        for name, windows in recordings:
+            if len(windows) < stay_windows:
+                continue
+            looks = scene if scene in untaught_pictures else rng.choice(untaught_pictures)
+            kind = "untaught, in the background" if in_background(name) else "untaught"
+            stays.append(
+                Stay(
+                    kind,
+                    None,
+                    windows[:stay_windows],
+                    pictures_of(data.pictures[looks], rng, 8),
+                )
+            )
+    order = rng.permutation(len(stays))
+    return {
+        "taught": taught,
+        "audio": (np.concatenate(audio_X), audio_y),
+        "pictures": (picture_X, picture_y),
+        "stays": [stays[i] for i in order],
+    }
+
+
+def walk(plan: dict[str, Any], rate: int) -> dict[str, Any]:
+    """Teach, then walk through the engine; what happened in each stay."""
+    audio = make_recogniser("audio", FRESH_METHODS["audio"])
+    X, y = plan["audio"]
+    audio.fit(audio.featurize(X), y)
+    visual = make_recogniser("image", FRESH_METHODS["image"])
+    pictures, labels = plan["pictures"]
+    visual.fit(visual.featurize(pictures), labels)
+    stays: list[Stay] = plan["stays"]
+    clock = ManualClock()
+    clips = [Clip(s.truth, w) for s in stays for w in s.windows]
+    source = PacedAudio(clips, rate, realtime=False, clock=clock)
+    camera = WalkCamera(clock, stays)
+    user = Settings()
+    engine = Engine(
+        audio=source,
+        camera=camera,
+        acoustic=audio,
+        visual=visual,
+        fusion=live_policy("parallel", FusionConfig()),
+        clock=clock,
+        confidence_threshold=user.confidence_threshold,
+        smoother=steady(),
+    )
+    link = RecordingLink(clock)
+    engine.set_arm(link)  # the stand-in link (see the module docstring)
+    engine.set_action_learner(lambda scene, scores, confidence: {"place": scene})
+    asked: list[float] = []
+    engine.subscribe(
+        lambda e: asked.append(e.t) if isinstance(e, UnknownScene) and e.sense == "audio" else None
+    )
+    total = sum(len(s.windows) for s in stays) * WINDOW_S
+    engine.run_until(total + 0.5)
+    engine.stop()
+    starts = np.concatenate([[0.0], np.cumsum([len(s.windows) * WINDOW_S for s in stays])])
+    out = []
+    for i, stay in enumerate(stays):
+        begin, end = starts[i], starts[i + 1]
+        moves = [(t, place) for t, place in link.moves if begin < t <= end + 1e-6]
+        per_window = []
+        for w in range(len(stay.windows)):
+            lo, hi = begin + w * WINDOW_S, begin + (w + 1) * WINDOW_S
+            here = [p for t, p in moves if lo < t <= hi + 1e-6]
+            if not here:
+                per_window.append("none")
+            elif all(p == stay.truth for p in here):
+                per_window.append("right")
+            else:
+                per_window.append("wrong")
+        first_right = next((t - begin for t, p in moves if p == stay.truth), None)
+        out.append(
+            {
+                "kind": stay.kind,
+                "windows": per_window,
+                "first_right_s": first_right,
+                "asked": any(begin < t <= end + 1e-6 for t in asked),
+            }
+        )
+    return {"stays": out, "hours": total / 3600}
+
+
+def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    by_kind: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
+    asked: dict[str, list[bool]] = defaultdict(list)
+    first: list[float] = []
+    never = 0
+    wrong_moves, hours = 0, 0.0
+    for run in runs:
+        hours += run["hours"]
+        for stay in run["stays"]:
+            for outcome in stay["windows"]:
+                by_kind[stay["kind"]][outcome] += 1
+            wrong_moves += stay["windows"].count("wrong")
+            asked[stay["kind"]].append(stay["asked"])
+            if stay["kind"] == "taught":
+                if stay["first_right_s"] is None:
+                    never += 1
+                else:
+                    first.append(stay["first_right_s"])
+    shares = {
+        kind: {o: counts[o] / max(sum(counts.values()), 1) for o in ("right", "wrong", "none")}
+        | {"windows": sum(counts.values())}
+        for kind, counts in by_kind.items()
+    }
+    return {
+        "shares": shares,
+        "wrong_moves_per_hour": wrong_moves / hours if hours else 0.0,
+        "first_right_median_s": statistics.median(first) if first else None,
+        "first_right_within_10s": float(np.mean([f <= 10 for f in first])) if first else None,
+        "taught_stays_without_a_right_move": never,
+        "asked": {kind: float(np.mean(v)) for kind, v in asked.items()},
+    }
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, default=shared_data())
+    parser.add_argument("--sizes", default="2,3,5")
+    parser.add_argument("--draws", type=int, default=3)
+    parser.add_argument("--shots", type=int, default=3, help="windows taught a place")
+    parser.add_argument("--pictures", type=int, default=6, help="pictures taught a place")
+    parser.add_argument("--stay", type=float, default=40.0, help="seconds a stay lasts")
+    parser.add_argument("--json", type=Path)
+    args = parser.parse_args()
+    if not (args.data / "audio" / "dev").is_dir():
+        print(f"no real data at {args.data}; nothing to measure")
+        return 0
+    rate = make_recogniser("audio", FRESH_METHODS["audio"]).rate
+    start = time.time()
+    with library_noise_silenced():
+        data = Data(args.data, rate, max_windows=args.shots + 4 * int(args.stay / WINDOW_S))
+    print(
+        f"{sum(len(r) for r in data.recordings.values())} recordings, scenes with pictures and "
+        f"sound: {', '.join(data.both)}; {args.draws} draws a size, {args.shots} windows and "
+        f"{args.pictures} pictures a place, stays of {args.stay:g} s"
+    )
+    figures = {}
+    for size in [int(s) for s in args.sizes.split(",")]:
+        runs = []
+        for draw in range(args.draws):
+            plan = plan_walk(data, size, args, np.random.default_rng([size, draw]))
+            with library_noise_silenced():
+                runs.append(walk(plan, rate))
+            print(f"  {size} places, draw {draw}: {', '.join(plan['taught'])}", flush=True)
+        result = summarise(runs)
+        figures[size] = result
+        print(f"{size} places taught ({time.time() - start:.0f} s so far):")
+        for kind, share in sorted(result["shares"].items()):
+            print(
+                f"  {kind:<28} windows {share['windows']:>5}  right {share['right']:.3f}  "
+                f"wrong {share['wrong']:.3f}  none {share['none']:.3f}  "
+                f"asked in {result['asked'][kind]:.2f} of stays"
+            )
+        print(
+            f"  wrong moves per hour of walking {result['wrong_moves_per_hour']:.1f}; first right "
+            f"move in a taught stay after {result['first_right_median_s']} s (median), within "
+            f"10 s in {result['first_right_within_10s']} of them, "
+            f"{result['taught_stays_without_a_right_move']} taught stays with none"
+        )
+    if args.json:
+        args.json.write_text(json.dumps(figures, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

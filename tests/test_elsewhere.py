@@ -1,0 +1,157 @@
+"""Knowing where it was not taught: the universal background, the open probabilities of
+`kmeans-encoder`, how the senses combine them, and asking only when a place holds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from servant_core.audio import read_audio
+from servant_core.capture.replay import Clip, PacedAudio
+from servant_core.capture.source import ManualClock
+from servant_core.engine import Engine
+from servant_core.events import AcousticPrediction, UnknownScene
+from servant_core.fusion.elsewhere import elsewhere_mass, place_probability
+from servant_core.modelfile import load_model, save_model
+from servant_core.recognisers import UNKNOWN, make_recogniser
+from servant_core.recognisers.background import BACKGROUND_PATH, load_background
+
+# --- the pure combination ------------------------------------------------------------------
+
+
+def test_a_coin_toss_picture_changes_nothing() -> None:
+    scores = {"acoustic": {"cafe": 0.7, "street": 0.1}, "visual": {"cafe": 0.5, "street": 0.5}}
+    sure = place_probability("cafe", scores, ("acoustic", "visual"), {"acoustic"})
+    assert sure == pytest.approx(0.7)
+    assert elsewhere_mass(scores["acoustic"]) == pytest.approx(0.2)
+
+
+def test_a_picture_of_the_place_raises_it_and_one_of_another_lowers_it() -> None:
+    sound = {"cafe": 0.5, "street": 0.1}  # elsewhere 0.4
+    roles, open_roles = ("acoustic", "visual"), {"acoustic"}
+    seen_cafe = place_probability(
+        "cafe", {"acoustic": sound, "visual": {"cafe": 0.9, "street": 0.1}}, roles, open_roles
+    )
+    seen_street = place_probability(
+        "cafe", {"acoustic": sound, "visual": {"cafe": 0.1, "street": 0.9}}, roles, open_roles
+    )
+    # by hand: cafe 0.5·1.8 = 0.9, street 0.1·0.2 = 0.02, elsewhere 0.4 → 0.9 / 1.32
+    assert seen_cafe == pytest.approx(0.9 / 1.32)
+    assert seen_street < 0.5 < seen_cafe
+
+
+def test_somewhere_else_is_not_made_a_taught_place_by_the_pictures() -> None:
+    """Sound sure it is elsewhere: a picture sure of the café cannot move the arm there."""
+    scores = {"acoustic": {"cafe": 0.02, "street": 0.01}, "visual": {"cafe": 0.99, "street": 0.01}}
+    assert place_probability("cafe", scores, ("acoustic", "visual"), {"acoustic"}) < 0.05
+
+
+def test_with_no_sense_knowing_elsewhere_the_least_sure_share_stands() -> None:
+    scores = {"acoustic": {"cafe": 0.8, "street": 0.2}, "visual": {"cafe": 0.6, "street": 0.4}}
+    assert place_probability("cafe", scores, ("acoustic", "visual"), set()) == pytest.approx(0.6)
+
+
+# --- the background file --------------------------------------------------------------------
+
+
+def test_the_background_ships_with_the_package_and_drops_excluded_recordings() -> None:
+    assert BACKGROUND_PATH.is_file() and BACKGROUND_PATH.stat().st_size < 4_000_000
+    params = make_recogniser("audio", "kmeans-encoder").params()
+    whole = load_background(params)
+    assert whole is not None and whole.frames.ndim == 3 and whole.frames.shape[2] == 64
+    assert all(not name.startswith("/") for name in whole.recordings)
+    named = str(whole.recordings[0])
+    fewer = load_background(params, exclude=[f"some/folder/{named}"])
+    assert fewer is not None and named not in set(fewer.recordings.tolist())
+    assert len(fewer.frames) < len(whole.frames)
+    assert load_background({**params, "n_mels": 40}) is None  # another featurizer: unusable
+
+
+# --- kmeans-encoder on real recordings --------------------------------------------------------
+
+
+def windows_of(path, rate: int) -> np.ndarray:
+    audio = read_audio(path, rate)
+    n = len(audio) // (5 * rate)
+    return audio[: n * 5 * rate].reshape(n, 5 * rate)
+
+
+@pytest.fixture(scope="module")
+def two_places(shared_data):
+    """Two places taught as teach mode does (three windows each), and what later came."""
+    model = make_recogniser("audio", "kmeans-encoder")
+    dev = shared_data / "audio" / "dev"
+    cafe = model.featurize(windows_of(dev / "cafe/audio-ambient-cafe.mp3", model.rate))
+    street = model.featurize(windows_of(dev / "street/audio-ambient-city.mp3", model.rate))
+    model.fit(np.concatenate([cafe[:3], street[:3]]), ["cafe"] * 3 + ["street"] * 3)
+    site = windows_of(dev / "construction/relaxandsleep-construction-site.mp3", model.rate)
+    return model, cafe[3:], model.featurize(site)
+
+
+@pytest.mark.slow
+def test_a_building_site_is_elsewhere_with_two_places_taught(two_places) -> None:
+    model, later_cafe, site = two_places
+    assert model.knows_elsewhere
+    site_open = model.open_proba(site)
+    assert np.all(site_open.sum(axis=1) <= 1 + 1e-9)
+    assert np.mean(site_open.max(axis=1) >= 0.5) <= 0.1  # before: 0.98 named a taught place
+    assert np.mean(model.predict(site) == UNKNOWN) >= 0.9
+    assert np.mean(model.confidence(later_cafe) >= 50) >= 0.85
+    assert np.mean(model.predict(later_cafe) == "cafe") >= 0.85
+    # the shares among the taught places are still there, summing to one
+    np.testing.assert_allclose(model.predict_proba(site).sum(axis=1), 1.0)
+
+
+@pytest.mark.slow
+def test_somewhere_else_survives_the_model_file(two_places, tmp_path) -> None:
+    model, _, site = two_places
+    loaded = load_model(save_model(tmp_path / "m.npz", {"acoustic": model}))["acoustic"]
+    np.testing.assert_allclose(loaded.open_proba(site), model.open_proba(site), atol=1e-5)
+
+
+def test_a_model_without_a_background_knows_no_elsewhere(tone_windows) -> None:
+    X, y = tone_windows
+    model = make_recogniser("audio", "kmeans-encoder", n_codewords=8, background=False)
+    model.fit(model.featurize(X), y)
+    assert not model.knows_elsewhere
+    np.testing.assert_allclose(
+        model.open_proba(model.featurize(X)), model.predict_proba(model.featurize(X))
+    )
+
+
+@pytest.fixture
+def tone_windows() -> tuple[np.ndarray, list[str]]:
+    rng = np.random.default_rng(0)
+    t = np.arange(5 * 22050) / 22050
+    low = [np.sin(2 * np.pi * 300 * t) + 0.1 * rng.standard_normal(len(t)) for _ in range(3)]
+    high = [np.sin(2 * np.pi * 3000 * t) + 0.1 * rng.standard_normal(len(t)) for _ in range(3)]
+    return np.asarray(low + high, dtype=np.float32), ["low"] * 3 + ["high"] * 3
+
+
+# --- asking only when an untaught place holds ------------------------------------------------
+
+
+@pytest.mark.slow
+def test_what_is_this_place_is_asked_once_an_untaught_place_held_30_s(
+    two_places, shared_data
+) -> None:
+    model, _, _ = two_places
+    rate = model.rate
+    site = read_audio(
+        shared_data / "audio/dev/construction/relaxandsleep-construction-site.mp3", rate
+    )[: 45 * rate]
+    clock = ManualClock()
+    engine = Engine(
+        audio=PacedAudio([Clip(None, site)], rate, realtime=False, clock=clock),
+        acoustic=model,
+        clock=clock,
+        spectrum_fps=0,
+    )
+    events: list = []
+    engine.subscribe(events.append)
+    engine.run_until(46.0)
+    heard = [e for e in events if isinstance(e, AcousticPrediction)]
+    asked = [e for e in events if isinstance(e, UnknownScene)]
+    assert sum(e.scene is None for e in heard) >= 8
+    assert asked, "never asked at a building site"
+    assert min(e.t for e in asked) >= 30.0 - 1e-6  # not before the place held 30 s
