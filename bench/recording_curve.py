@@ -32,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import shared_data  # noqa: E402
-from peers import PEERS, RATE, featurize_all, with_recording_column  # noqa: E402
+from peers import PEERS, RATE, featurize_all, with_source_column  # noqa: E402
 
 from servant_core.cli import library_noise_silenced  # noqa: E402
 from servant_core.library import SceneLibrary, WindowFeatures  # noqa: E402
@@ -111,7 +111,7 @@ def main() -> None:
         PEER: lambda: PEERS[PEER][1](args.seed),
     }
     for name, make in makers.items():
-        part = with_recording_column(features[name]) if name == PEER else features[name]
+        part = with_source_column(features[name]) if name == PEER else features[name]
         start = time.perf_counter()
         figures = curve(part, plans, make)
         print(
