@@ -2,6 +2,9 @@
 
 Audio: `temporal` — the first 60 % of each recording's windows train, the rest test;
 `recording` — leave one recording out, train on the rest, pool the predictions;
+`source` — leave one source out (a place never heard, through a microphone never heard): the
+recordings of a source are the files whose name starts with the same word before its first `-`
+(`moodist-cafe.mp3`: `moodist`), or the groups of a `--groups` file;
 `fewshot` — the first k windows of each recording train (teach mode: a few presses of the teach
 key), the temporal test part tests; `train-test` — one library trains, another tests.
 Every protocol can be repeated over random states (`over_seeds`): mean and spread.
@@ -51,7 +54,7 @@ from servant_core.recognisers import (
 from servant_core.recognisers.background import kept_out
 from servant_core.recognisers.base import open_probabilities
 
-PROTOCOLS = ("temporal", "recording", "fewshot")
+PROTOCOLS = ("temporal", "recording", "source", "fewshot")
 DEFAULT_SHOTS = (1, 2, 3, 5, 10)
 TRAIN_FRACTION = 0.6
 IMAGE_TRAIN_FRACTION = 0.7
@@ -174,23 +177,83 @@ def fewshot_split(
     return temporal_split(recording, position, fraction) & (position < shots)
 
 
+def source_of(path: Path) -> str:
+    """A recording's source: its file name up to the first `-` (`moodist-cafe.mp3`: `moodist`;
+    a name without one is a source of its own)."""
+    return Path(path).stem.split("-", 1)[0]
+
+
+def read_groups(path: Path, root: Path) -> dict[str, str]:
+    """A `--groups` file: one recording a line, its path (relative to `root`, or absolute below
+    it) and then its group, the line's last word; blank lines and `#` comments are skipped.
+    Returns recording path relative to `root` (POSIX) -> group."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as error:
+        raise ServantError(f"{path}: cannot read the groups file ({error})") from None
+    groups: dict[str, str] = {}
+    for number, line in enumerate(text.splitlines(), 1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        parts = line.rsplit(None, 1)
+        if len(parts) != 2:
+            raise ServantError(
+                f"{path}:{number}: expected a recording's path and then its group, found {line!r}"
+            )
+        name, group = Path(parts[0]), parts[1]
+        if name.is_absolute():
+            try:
+                name = name.relative_to(root)
+            except ValueError:
+                raise ServantError(
+                    f"{path}:{number}: {name} is not below the scene library {root}"
+                ) from None
+        groups[name.as_posix()] = group
+    return groups
+
+
+def recording_groups(library: SceneLibrary, groups: Mapping[str, str] | None = None) -> list[str]:
+    """The group of each of `library`'s recordings (in its order): from `groups` (recording path
+    relative to the library's root -> group), or its source (`source_of`) without one. A
+    recording `groups` does not name is an error: guessing its group could leak it into a fold
+    that tests its twin."""
+    if groups is None:
+        return [source_of(r.path) for r in library.recordings]
+    names = [r.path.relative_to(library.root).as_posix() for r in library.recordings]
+    missing = [name for name in names if name not in groups]
+    if missing:
+        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
+        raise ServantError(
+            f"the groups file names no group for {', '.join(missing[:3])}{more}; give every "
+            "recording of the library a line `PATH GROUP`"
+        )
+    return [groups[name] for name in names]
+
+
 @dataclass
 class AudioPlan:
     """One scored row: a model per fold fitted on `folds[i]` (train mask over the windows) and
-    tested on `tests[i]`; `shots` for a fewshot row."""
+    tested on `tests[i]`; `shots` for a fewshot row; `left_out[i]` names the group fold i
+    holds out (source protocol)."""
 
     protocol: str
     folds: list[np.ndarray]
     tests: list[np.ndarray]
     shots: int | None = None
+    left_out: list[str] | None = None
 
 
 def audio_plans(
-    wf: WindowFeatures, protocol: str, shots: Sequence[int] = DEFAULT_SHOTS
+    wf: WindowFeatures,
+    protocol: str,
+    shots: Sequence[int] = DEFAULT_SHOTS,
+    groups: Sequence[str] | None = None,
 ) -> list[AudioPlan]:
     """The folds of `protocol` over `wf`'s windows: `temporal` one fold, `recording` one per
-    recording (tested on it alone), `fewshot` one row per number of shots (each tested on the
-    temporal test part)."""
+    recording (tested on it alone), `source` one per group of recordings (`groups[i]` is the
+    group of `wf.recordings[i]`; default: each recording's source), `fewshot` one row per number
+    of shots (each tested on the temporal test part)."""
     temporal = temporal_split(wf.recording, wf.position)
     if protocol == "temporal":
         return [AudioPlan(protocol, [temporal], [~temporal])]
@@ -199,6 +262,15 @@ def audio_plans(
             AudioPlan(protocol, [fewshot_split(wf.recording, wf.position, k)], [~temporal], k)
             for k in shots
         ]
+    if protocol == "source":
+        if groups is None:
+            groups = [source_of(r.path) for r in wf.recordings]
+        if len(groups) != len(wf.recordings):
+            raise ValueError("one group per recording of the windows is needed")
+        window_group = np.array(groups, dtype=object)[wf.recording]
+        left_out = sorted(set(window_group.tolist()))
+        tests = [window_group == g for g in left_out]
+        return [AudioPlan(protocol, [~t for t in tests], tests, left_out=left_out)]
     rows = [wf.recording != r for r in np.unique(wf.recording)]
     return [AudioPlan(protocol, rows, [~row for row in rows])]
 
@@ -223,8 +295,11 @@ def _evaluate_folds(
     preds = Predictions([], [], [])
     tested: list[np.ndarray] = []  # the recording of each test window, in prediction order
     skipped: list[str] = []
+    folds: list[dict[str, Any]] = []
     n_train = 0
-    for train, test in zip(plan.folds, plan.tests, strict=True):
+    for i, (train, test) in enumerate(zip(plan.folds, plan.tests, strict=True)):
+        if plan.left_out is not None:
+            folds.append(_fold_summary(wf, train, test, plan.left_out[i], names))
         try:
             model = make_model().fit(wf.features[train], wf.scenes[train])
         except ServantError as error:
@@ -239,7 +314,24 @@ def _evaluate_folds(
     result = scores(preds, sorted(set(wf.scenes.tolist())))
     result["per_recording"] = per_recording(preds, np.concatenate(tested), names)
     result.update(n_train=n_train, skipped_folds=skipped)
+    if plan.left_out is not None:
+        result["folds"] = folds
     return result
+
+
+def _fold_summary(
+    wf: WindowFeatures, train: np.ndarray, test: np.ndarray, left_out: str, names: Sequence[str]
+) -> dict[str, Any]:
+    """What a fold holds out: its group, its recordings, its windows, and the scenes it tests
+    that no training window carries (those windows cannot be named right)."""
+    trained = set(wf.scenes[train].tolist())
+    return {
+        "left_out": left_out,
+        "recordings": [names[r] for r in np.unique(wf.recording[test])],
+        "n_train": int(train.sum()),
+        "n_test": int(test.sum()),
+        "unseen_scenes": sorted(set(wf.scenes[test].tolist()) - trained),
+    }
 
 
 def evaluate_windows(
@@ -332,16 +424,19 @@ def evaluate_audio(
     test_library: SceneLibrary | None = None,
     shots: Sequence[int] = DEFAULT_SHOTS,
     seeds: int = 1,
+    groups: Mapping[str, str] | None = None,
 ) -> dict[str, Any]:
     """Score `method` on `library`'s windows under `protocol`; with `test_library`, train on all
     of `library` and test on all of `test_library` (protocol `train-test`). `fewshot` gives one
-    row per number of `shots` under `rows`. With `seeds` > 1 every figure is a mean over random
-    states 0..seeds-1 (see `over_seeds`)."""
+    row per number of `shots` under `rows`. `source` leaves out one group of recordings at a
+    time: `groups` (recording path relative to the root -> group) or each file's source. With
+    `seeds` > 1 every figure is a mean over random states 0..seeds-1 (see `over_seeds`)."""
     if protocol not in PROTOCOLS:
         raise ServantError(f"unknown protocol {protocol!r}; choose {', '.join(PROTOCOLS)}")
     if protocol == "fewshot" and (not shots or min(shots) < 1):
         raise ServantError("--shots needs whole numbers of windows, each at least 1 (e.g. 1,3,10)")
     params = params or {}
+    recording_group = recording_groups(library, groups) if protocol == "source" else None
     probe = make_audio_recogniser(method, **params)
     wf = featurize_library_audio(library, probe, on_error, on_progress)
     names = [str(r.path.relative_to(library.root)) for r in wf.recordings]
@@ -352,7 +447,7 @@ def evaluate_audio(
         wf = _joined(wf, test_wf)
         plans = [AudioPlan("train-test", [train], [~train])]
     else:
-        plans = audio_plans(wf, protocol, shots)
+        plans = audio_plans(wf, protocol, shots, recording_group)
     rows = evaluate_windows(
         wf,
         names,

@@ -24,6 +24,8 @@ from servant_core.evaluate import (
     evaluate_image,
     format_tables,
     paper_tables,
+    read_groups,
+    recording_groups,
     run_encounter,
     run_fusion,
     said_of,
@@ -84,7 +86,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     evaluate = subparsers.add_parser("eval", help="evaluate a method on a scene library")
     senses = evaluate.add_subparsers(dest="sense", metavar="SENSE", required=True)
     audio = senses.add_parser(
-        "audio", help="acoustic recognition: temporal, recording or fewshot protocol"
+        "audio", help="acoustic recognition: temporal, recording, source or fewshot protocol"
     )
     audio.add_argument("root", type=Path, help="training recordings (and test, without --test)")
     audio.add_argument(
@@ -92,7 +94,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         choices=list(PROTOCOLS),
         default="temporal",
         help="temporal: the first 60%% of each recording trains; recording: leave one recording "
-        "out; fewshot: the first k windows of each recording train",
+        "out; source: leave one source out (the file name up to its first '-', or --groups); "
+        "fewshot: the first k windows of each recording train",
+    )
+    audio.add_argument(
+        "--groups",
+        type=Path,
+        metavar="FILE",
+        help="source protocol: the group of each recording, one a line: PATH GROUP (PATH "
+        "relative to ROOT); default: the file name up to its first '-'",
     )
     audio.add_argument(
         "--test",
@@ -110,6 +120,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--method", choices=sorted(ACOUSTIC_METHODS), default="paper", help="acoustic method"
     )
     audio.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
+    audio.add_argument(
+        "--min-recordings",
+        type=options.bounded_int(1, 10_000),
+        default=1,
+        metavar="N",
+        help="keep only the scenes with at least N recordings (default: %(default)s)",
+    )
     _seeds_option(audio)
     _audio_options(audio)
     _json_option(audio)
@@ -490,6 +507,13 @@ def _format_scores(result: dict[str, Any]) -> str:
             + ", ".join(f"{scene} {n}" for scene, n in r["heard_as"].items())
             for name, r in result["per_recording"].items()
         ]
+    if "folds" in result:
+        lines.append("left out in turn (recordings, test windows, scenes it alone has):")
+        lines += [
+            f"  {f['left_out']:<24} {len(f['recordings']):>3} {f['n_test']:>5}  "
+            + (", ".join(f["unseen_scenes"]) or "-")
+            for f in result["folds"]
+        ]
     lines += [f"skipped fold: {s}" for s in result.get("skipped_folds", [])]
     return "\n".join(lines)
 
@@ -510,9 +534,16 @@ def cmd_eval_audio(args: argparse.Namespace) -> int:
         raise ServantError(
             "--test trains on all of ROOT and tests on all of TEST; leave out --protocol"
         )
-    library = _library(args.root, args.scenes)
+    if args.groups is not None and args.protocol != "source":
+        raise ServantError(
+            "--groups names the groups of --protocol source; add it or leave out --groups"
+        )
+    library = _with_recordings(_library(args.root, args.scenes), args.min_recordings)
+    groups = read_groups(args.groups, library.root) if args.groups is not None else None
     if args.protocol == "recording":
         _check_recording_protocol(library)
+    if args.protocol == "source":
+        _check_source_protocol(library, recording_groups(library, groups))
     test = _library(args.test, args.scenes) if args.test else None
     result = evaluate_audio(
         library,
@@ -524,6 +555,7 @@ def cmd_eval_audio(args: argparse.Namespace) -> int:
         test_library=test,
         shots=args.shots,
         seeds=args.seeds,
+        groups=groups,
     )
     text = _format_fewshot(result) if "rows" in result else _format_scores(result)
     emit(args, result, text)
@@ -540,6 +572,38 @@ def _check_recording_protocol(library: SceneLibrary) -> None:
             "recording it tests, which leaves fewer than two scenes here (recordings per scene: "
             f"{found}); add a second recording to a scene, a third scene, or use --protocol "
             "temporal"
+        )
+
+
+def _with_recordings(library: SceneLibrary, least: int) -> SceneLibrary:
+    """`--min-recordings`: the scenes with at least `least` recordings."""
+    if least <= 1:
+        return library
+    per_scene = Counter(r.scene for r in library.recordings)
+    keep = [s for s in library.scenes if per_scene[s] >= least]
+    if not keep:
+        raise ServantError(
+            f"{library.root}: no scene has {least} recordings or more (the most: "
+            f"{max(per_scene.values(), default=0)}); lower --min-recordings"
+        )
+    return library.restricted(keep)
+
+
+def _check_source_protocol(library: SceneLibrary, groups: list[str]) -> None:
+    """Leaving a group out must leave two scenes to train on, for at least one group."""
+    scenes_of: dict[str, set[str]] = {}
+    for recording, group in zip(library.recordings, groups, strict=True):
+        scenes_of.setdefault(group, set()).add(recording.scene)
+    everything = {r.scene for r in library.recordings}
+    if not any(
+        len({s for g, scenes in scenes_of.items() if g != left_out for s in scenes}) >= 2
+        for left_out in scenes_of
+    ):
+        raise ServantError(
+            f"{library.root}: nothing to evaluate: the source protocol trains without the source "
+            f"it tests, which leaves fewer than two scenes here ({len(scenes_of)} source(s), "
+            f"scenes {', '.join(sorted(everything)) or 'none'}); add recordings from other "
+            "sources, or use --protocol recording"
         )
 
 
