@@ -267,6 +267,8 @@ def walk(plan: dict[str, Any], rate: int) -> dict[str, Any]:
                 "windows": per_window,
                 "first_right_s": first_right,
                 "asked": any(begin < t <= end + 1e-6 for t in asked),
+                # not about the last place's windows: after the stay's first two windows
+                "asked_late": any(begin + 2 * WINDOW_S < t <= end + 1e-6 for t in asked),
             }
         )
     return {"stays": out, "hours": total / 3600}
@@ -275,6 +277,7 @@ def walk(plan: dict[str, Any], rate: int) -> dict[str, Any]:
 def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
     by_kind: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
     asked: dict[str, list[bool]] = defaultdict(list)
+    asked_late: dict[str, list[bool]] = defaultdict(list)
     first: list[float] = []
     never = 0
     wrong_moves, hours = 0, 0.0
@@ -285,6 +288,7 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
                 by_kind[stay["kind"]][outcome] += 1
             wrong_moves += stay["windows"].count("wrong")
             asked[stay["kind"]].append(stay["asked"])
+            asked_late[stay["kind"]].append(stay["asked_late"])
             if stay["kind"] == "taught":
                 if stay["first_right_s"] is None:
                     never += 1
@@ -302,6 +306,7 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
         "first_right_within_10s": float(np.mean([f <= 10 for f in first])) if first else None,
         "taught_stays_without_a_right_move": never,
         "asked": {kind: float(np.mean(v)) for kind, v in asked.items()},
+        "asked_late": {kind: float(np.mean(v)) for kind, v in asked_late.items()},
     }
 
 
@@ -342,7 +347,8 @@ def main() -> int:
             print(
                 f"  {kind:<28} windows {share['windows']:>5}  right {share['right']:.3f}  "
                 f"wrong {share['wrong']:.3f}  none {share['none']:.3f}  "
-                f"asked in {result['asked'][kind]:.2f} of stays"
+                f"asked in {result['asked'][kind]:.2f} of stays "
+                f"({result['asked_late'][kind]:.2f} after their first 10 s)"
             )
         print(
             f"  wrong moves per hour of walking {result['wrong_moves_per_hour']:.1f}; first right "

@@ -18,7 +18,7 @@ import inspect
 import math
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -52,7 +52,7 @@ from servant_core.recognisers import (
     methods_for,
 )
 from servant_core.recognisers.background import kept_out
-from servant_core.recognisers.base import open_probabilities
+from servant_core.recognisers.base import open_predict, open_probabilities
 
 PROTOCOLS = ("temporal", "recording", "source", "fewshot")
 DEFAULT_SHOTS = (1, 2, 3, 5, 10)
@@ -97,14 +97,18 @@ class Predictions:
     truth: list[str]
     predicted: list[str]
     p_truth: list[float]
+    # where the open set says "somewhere else" (`open_predict`) though a taught place was named
+    elsewhere: list[bool] = field(default_factory=list)
 
     def extend(self, model: Recogniser, X: np.ndarray, truth: Sequence[str]) -> None:
         predicted = model.predict(X)
+        opened = open_predict(model, X)
         proba = model.predict_proba(X)
         column = {s: j for j, s in enumerate(model.scenes_)}
         for i, scene in enumerate(truth):
             self.truth.append(str(scene))
             self.predicted.append(str(predicted[i]))
+            self.elsewhere.append(bool(opened[i] == UNKNOWN and predicted[i] != UNKNOWN))
             j = column.get(str(scene))
             self.p_truth.append(float(proba[i, j]) if j is not None else 0.0)
 
@@ -126,6 +130,8 @@ def scores(preds: Predictions, scenes: Sequence[str]) -> dict[str, Any]:
         "per_class": recall,
         "log_loss": float(-np.mean(np.log(p))),
         "unknown_rate": float(np.mean(predicted == UNKNOWN)),
+        # the open set's cost: windows of taught places it would call somewhere else
+        "elsewhere_rate": float(np.mean(preds.elsewhere)) if preds.elsewhere else 0.0,
         "n_test": int(len(truth)),
         "confusion": {
             "labels": labels,
@@ -357,7 +363,7 @@ def evaluate_windows(
     return rows
 
 
-SEED_METRICS = ("accuracy", "balanced_accuracy", "log_loss", "unknown_rate")
+SEED_METRICS = ("accuracy", "balanced_accuracy", "log_loss", "unknown_rate", "elsewhere_rate")
 
 
 def over_seeds(run: Callable[[int | None], dict[str, Any]], seeds: int) -> dict[str, Any]:
@@ -633,7 +639,7 @@ def run_fusion(
 def said_of(model: Recogniser, X: np.ndarray) -> list[Said]:
     """Each row's opinion: scene, confidence and probability per scene (and not somewhere
     else, where the recogniser knows somewhere else)."""
-    scenes, confidences = model.predict(X), model.confidence(X)
+    scenes, confidences = open_predict(model, X), model.confidence(X)
     proba = open_probabilities(model, X)
     return [
         (

@@ -46,7 +46,7 @@ from servant_core.recognisers import (
     make_recogniser,
 )
 from servant_core.recognisers.background import kept_out
-from servant_core.recognisers.base import knows_elsewhere, open_probabilities
+from servant_core.recognisers.base import knows_elsewhere, open_predict, open_probabilities
 from servant_core.senses import ROLE_SENSE, SAMPLE_SENSES
 from servant_core.storage import data_dir
 
@@ -400,7 +400,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
                 f"{args.audio}: shorter than one {seconds:g} s window; record longer"
             )
         X = audio.featurize(windows)
-        scenes, confidences = audio.predict(X), audio.confidence(X)
+        scenes, confidences = open_predict(audio, X), audio.confidence(X)
         unit = audio.confidence_unit
         result["acoustic"] = [
             {"window": i, "scene": str(s), "confidence": float(c), "confidence_unit": unit}

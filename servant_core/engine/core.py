@@ -67,7 +67,7 @@ from servant_core.fusion.elsewhere import elsewhere_mass, place_probability, ste
 from servant_core.fusion.smoothing import SceneSmoother
 from servant_core.library import SceneLibrary
 from servant_core.recognisers import FRESH_METHODS, UNKNOWN, Recogniser
-from servant_core.recognisers.base import knows_elsewhere, open_probabilities
+from servant_core.recognisers.base import knows_elsewhere, open_predict, open_probabilities
 from servant_core.senses import SAMPLE_SENSES, SENSES
 from servant_core.storage import data_dir
 
@@ -206,6 +206,8 @@ class Engine:
         self._unknowns = Unknowns()
         self._unknown_since: float | None = None  # since when the sound names no taught place
         self._open_roles: set[str] = set()  # roles whose probabilities know somewhere else
+        # the last window's probabilities, where the sound knows somewhere else
+        self._previous_window: dict[str, float] | None = None
         self.sensor_port: str | None = None  # the settings' board the senses were opened on
         # the user's settings the engine was built on, the command line's overrides applied (a
         # front end starts from these, not from the file: `servant run --port P` keeps P)
@@ -383,16 +385,16 @@ class Engine:
         X = acoustic.featurize(resample(window, rate, model_rate)[None, :])
         scene, confidence, scores = _predict(acoustic, X)
         unit = acoustic.confidence_unit
-        if self.smoother is not None and unit == "%":
+        if knows_elsewhere(acoustic):
             # unknown though its probabilities name a place: far from every place taught
             far = scene == UNKNOWN and sum(scores.values()) > 0.5
-            smoothed = self._smoothed(far, scores)
-            if knows_elsewhere(acoustic):
-                named, scores = steady_open(scores, smoothed[2], far)
-                scene = UNKNOWN if named is None else named
-                confidence = 100.0 * scores.get(named, 0.0) if named else 0.0
-            else:
-                scene, confidence, scores = smoothed
+            with self._lock:
+                previous, self._previous_window = self._previous_window, scores
+            named, scores = steady_open(scores, previous or {}, far)
+            scene = UNKNOWN if named is None else named
+            confidence = 100.0 * scores[named] if named else 0.0
+        elif self.smoother is not None and unit == "%":
+            scene, confidence, scores = self._smoothed(scene == UNKNOWN, scores)
         with self._lock:
             self._scores["acoustic"] = scores
             self._note_open("acoustic", acoustic)
@@ -462,6 +464,7 @@ class Engine:
         """A new acoustic model: what the old one believed about past windows means nothing."""
         if self.smoother is not None:
             self.smoother.reset()
+        self._previous_window = None
 
     def _note_open(self, role: str, recogniser: Recogniser) -> None:
         """Remember whether a role's probabilities leave room for somewhere else (under _lock)."""
@@ -483,14 +486,10 @@ class Engine:
     def _smoothed(self, far: bool, scores: dict[str, float]) -> tuple[str, float, dict[str, float]]:
         """The window's judgement through the forward filter: (scene or UNKNOWN, confidence in
         percent, {scene: probability}) of the belief after this window. `far`: the window is
-        unlike every place taught; otherwise what its probabilities leave is somewhere else's."""
+        unlike every place taught."""
         assert self.smoother is not None
-        elsewhere = elsewhere_mass(scores)
-        evidence = {UNKNOWN: 1.0} if far else dict(scores)
-        if not far and elsewhere > 1e-9:
-            evidence[UNKNOWN] = elsewhere
         with self._lock:
-            belief = self.smoother.update(evidence)
+            belief = self.smoother.update({UNKNOWN: 1.0} if far else scores)
         best = max(belief, key=lambda s: belief[s])
         return best, 100.0 * belief[best], {s: p for s, p in belief.items() if s != UNKNOWN}
 
@@ -816,7 +815,7 @@ def decision_unit(*recognisers: Recogniser | None) -> str | None:
 
 def _predict(recogniser: Recogniser, X: np.ndarray) -> tuple[str, float, dict[str, float]]:
     """(scene or UNKNOWN, confidence, {scene: probability}) for a single featurized row."""
-    scene = str(recogniser.predict(X)[0])
+    scene = str(open_predict(recogniser, X)[0])
     confidence = float(recogniser.confidence(X)[0])
     probabilities = open_probabilities(recogniser, X)[0]
     return (

@@ -56,14 +56,15 @@ def place_probability(
 
 
 def steady_open(
-    window: Mapping[str, float], belief: Mapping[str, float], far: bool
+    window: Mapping[str, float], previous: Mapping[str, float], far: bool
 ) -> tuple[str | None, dict[str, float]]:
     """What a sense that knows somewhere else says of a window, held steady: each taught place
-    gets the smaller of this window's probability and the belief over the last windows (the
-    forward filter's), so neither one odd window nor a belief still lingering from the last
-    place can name a place alone. Returns (the place, or None where somewhere else has half the
-    probability or more, or the window is `far` from every taught place; the probabilities)."""
-    scores = {s: min(window.get(s, 0.0), belief.get(s, 0.0)) for s in window}
+    gets the smaller of its probability in this window and in the one before, so a place is
+    named only when two windows in a row say so: neither one odd window nor the last place,
+    lingering in the first window of the next, can name a place alone (pure). Returns (the
+    place, or None where somewhere else keeps half the probability or more, or the window is
+    `far` from every taught place; the held probabilities)."""
+    scores = {s: min(window.get(s, 0.0), previous.get(s, 0.0)) for s in window}
     if far or not scores or elsewhere_mass(scores) >= 0.5:
         return None, scores
     return max(scores, key=lambda s: scores[s]), scores

@@ -57,13 +57,10 @@ class LinearHeadAnswers:
 
     def predict(self, X: np.ndarray) -> np.ndarray:
         """The likeliest taught place; `UNKNOWN` where the row is far from every place taught
-        (the novelty head) or where it more likely comes from somewhere else than from any
-        taught place (somewhere else has half the probability or more)."""
+        (the novelty head). Whether it is more likely somewhere else: `open_predict`."""
         D = self._space(X)
-        open_proba = self._open_proba(D)
         names = np.asarray(self.scenes_, dtype=object)[np.argmax(self._proba(D), axis=1)]
-        elsewhere = open_proba.sum(axis=1) <= 0.5
-        names[self.novelty_head_.is_unknown(D) | elsewhere] = UNKNOWN
+        names[self.novelty_head_.is_unknown(D)] = UNKNOWN
         return names.astype(str)
 
     def confidence(self, X: np.ndarray) -> np.ndarray:
