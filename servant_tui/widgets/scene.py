@@ -118,8 +118,10 @@ class ScenePane(Static):
         else:
             style = "bold green" if last.scene else "yellow"
             rows.append(("decided", "decided", Text(last.line, style)))
-            average = confidence_text(last.confidence, last.confidence_unit)
-            rows.append(("average", "", f"average {average}"))
+            figure = confidence_text(last.confidence, last.confidence_unit)
+            # the probability of this place and not elsewhere, or the senses' average
+            said = "here, not elsewhere" if last.not_elsewhere else "average"
+            rows.append(("average", "", f"{said} {figure}"))
             if last.leaned_on:
                 # "leaned on …" across the columns: the line is too narrow for it after a blank
                 on = sense_words(last.leaned_on)
