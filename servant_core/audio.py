@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import os
-import stat
 from fractions import Fraction
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -13,6 +11,7 @@ import soundfile as sf
 from scipy.signal import resample_poly
 
 from servant_core.errors import ServantError
+from servant_core.storage import atomic_write_bytes, open_regular_file
 
 AUDIO_SUFFIXES = (".wav", ".flac", ".ogg", ".mp3")
 DEFAULT_RATE = 44100
@@ -57,24 +56,6 @@ def read_audio(path: str | Path, rate: int = DEFAULT_RATE) -> np.ndarray:
         handle.seek(0)
         mono = _decode_mono(path, handle, info)
     return resample(mono, info.samplerate, rate)
-
-
-def open_regular_file(path: Path, what: str) -> BinaryIO:
-    """Open a file for reading in Python (any file name works, even one that is not UTF-8);
-    a missing file, a folder, a FIFO or a device is refused without blocking on it."""
-    try:
-        if not stat.S_ISREG(os.stat(path).st_mode):
-            raise ServantError(f"{path}: not a regular file; give an {what}")
-        return open(path, "rb")
-    except FileNotFoundError:
-        raise ServantError(f"{path}: no such file; check the path") from None
-    except OSError as exc:
-        raise ServantError(f"{path}: cannot open the {what} ({os_reason(exc)})") from None
-
-
-def os_reason(exc: OSError) -> str:
-    """The operating system's short reason ("Permission denied"), not the whole repr."""
-    return exc.strerror or type(exc).__name__
 
 
 def _not_readable(path: Path, reason: str) -> ServantError:
@@ -170,8 +151,6 @@ def duration_seconds(path: str | Path) -> float:
 def write_wav(path: str | Path, signal: np.ndarray, rate: int) -> Path:
     """Write mono float audio as a 16-bit WAV, atomically (recordings are never half-written)."""
     import io
-
-    from servant_core.storage import atomic_write_bytes
 
     buffer = io.BytesIO()
     sf.write(buffer, np.clip(signal, -1.0, 1.0), rate, format="WAV", subtype="PCM_16")

@@ -18,12 +18,11 @@ from servant_core.audio import (
     DEFAULT_RATE,
     DEFAULT_WINDOW_SECONDS,
     cut_windows,
-    open_regular_file,
-    os_reason,
     read_audio,
 )
 from servant_core.errors import ServantError
 from servant_core.senses import PICTURE_SUFFIXES, SAMPLE_SENSES, UNKNOWN
+from servant_core.storage import open_regular_file, os_reason
 
 # A webcam frame is under 1 Mpx and a phone photo under 50 Mpx; a header claiming more is
 # damaged or hostile (a 1 MB PNG can claim gigabytes). Checked before decoding.

@@ -25,14 +25,18 @@ from servant_core.audio import (
     MIN_RATE,
     MIN_WINDOW_SECONDS,
     first_line,
-    open_regular_file,
-    os_reason,
 )
 from servant_core.errors import ServantError
 from servant_core.fusion.learned import FusionNet
 from servant_core.recognisers import UNKNOWN, Recogniser, methods_for
 from servant_core.senses import ROLE_SENSE
-from servant_core.storage import atomic_save_npz
+from servant_core.storage import (
+    atomic_save_npz,
+    check_replaceable,
+    is_servant_npz,
+    open_regular_file,
+    os_reason,
+)
 
 FORMAT = "servant-model"
 VERSION = 1
@@ -97,9 +101,7 @@ def save_model(
         for name, array in parts.items():
             arrays[f"{role}/{name}"] = np.asarray(array)
     arrays["header"] = np.array(json.dumps(header))
-    path = Path(path)
-    if path.is_dir():
-        raise ServantError(f"{path}: is a folder; give a model file name such as {path}/model.npz")
+    path = check_model_output(path)
     try:
         return atomic_save_npz(path, arrays)
     except OSError as exc:
@@ -107,6 +109,15 @@ def save_model(
             f"{path}: cannot save the model ({os_reason(exc)}); the previous file is unchanged, "
             "choose another place"
         ) from None
+
+
+def check_model_output(path: str | Path) -> Path:
+    """`path` if a model may be saved there: not a folder, nor a file that is not a model."""
+    path = Path(path)
+    if path.is_dir():
+        raise ServantError(f"{path}: is a folder; give a model file name such as {path}/model.npz")
+    check_replaceable(path, "model file", is_servant_npz)
+    return path
 
 
 def load_model(path: str | Path) -> dict[str, Recogniser]:

@@ -17,9 +17,8 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from servant_core.audio import os_reason
 from servant_core.errors import ServantError
-from servant_core.storage import atomic_write_bytes, atomic_write_text, data_dir
+from servant_core.storage import atomic_write_bytes, atomic_write_text, data_dir, os_reason
 
 FORMAT = "servant-teach-records"
 VERSION = 2

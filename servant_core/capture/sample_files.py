@@ -31,13 +31,13 @@ from pathlib import Path
 
 import numpy as np
 
-from servant_core.audio import DEFAULT_WINDOW_SECONDS, open_regular_file, os_reason
+from servant_core.audio import DEFAULT_WINDOW_SECONDS
 from servant_core.capture.replay import Clip, PacedAudio
 from servant_core.capture.sensors import CHANNELS, RATES
 from servant_core.capture.source import ManualClock
 from servant_core.errors import ServantError
 from servant_core.senses import SAMPLE_SENSES
-from servant_core.storage import atomic_write_text
+from servant_core.storage import atomic_write_text, open_regular_file, os_reason
 
 SUFFIXES = {s.stream: s.suffixes[0] for s in SAMPLE_SENSES.values() if s.stream}
 MAX_GAP_S = 1.0  # longer pauses in a log are not interpolated across

@@ -30,7 +30,7 @@ from servant_core.evaluate import (
 from servant_core.event_text import confidence_text, place
 from servant_core.fusion import POLICIES, FusionConfig, LearnedFusion
 from servant_core.library import SceneLibrary, featurize_recordings, read_picture, read_pictures
-from servant_core.modelfile import load_model_and_fusion, save_model
+from servant_core.modelfile import check_model_output, load_model_and_fusion, save_model
 from servant_core.progress import Progress
 from servant_core.recognisers import (
     ACOUSTIC_METHODS,
@@ -263,10 +263,8 @@ def _audio_params(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    if args.output is not None and args.output.is_dir():
-        raise ServantError(
-            f"{args.output}: is a folder; give a model file name such as {args.output}/model.npz"
-        )
+    if args.output is not None:
+        check_model_output(args.output)  # before the work, not after it
     library = SceneLibrary.scan(args.root)
     on_error = _warn if args.skip_bad else None
     recognisers: dict[str, Recogniser] = {}
