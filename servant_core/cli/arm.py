@@ -19,7 +19,7 @@ from servant_core.actions.records import (
     label_scores,
     load_records,
 )
-from servant_core.cli import emit, serve_until_stopped
+from servant_core.cli import emit, serve_until_stopped, terminal_text
 from servant_core.cli.options import bounded_int, finite_float
 from servant_core.errors import ServantError
 from servant_core.servo import PROTOCOLS
@@ -192,7 +192,7 @@ def run_move(args: argparse.Namespace) -> int:
         link.arm()
         reached = link.move_to(pose)
         for note in link.notes:
-            print(note, file=out)
+            print(terminal_text(note), file=out)
         emit(
             args,
             {
@@ -240,7 +240,7 @@ class Session:
         self.echo = not (hasattr(inp, "isatty") and inp.isatty())
 
     def say(self, line: str) -> None:
-        print(line, file=self.out, flush=True)
+        print(terminal_text(line), file=self.out, flush=True)
 
     def ask(self, prompt: str) -> str | None:
         """The answer, stripped; None at the end of input."""
@@ -252,7 +252,7 @@ class Session:
                 self.out.write("\n")
             return None
         if self.echo:
-            self.out.write(line if line.endswith("\n") else line + "\n")
+            self.out.write(terminal_text(line if line.endswith("\n") else line + "\n"))
         return line.strip()
 
 
