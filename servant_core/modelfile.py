@@ -28,6 +28,7 @@ from servant_core.audio import (
 )
 from servant_core.errors import ServantError
 from servant_core.fusion.learned import FusionNet
+from servant_core.numbers import is_finite_number, json_loads
 from servant_core.recognisers import UNKNOWN, Recogniser, methods_for
 from servant_core.senses import ROLE_SENSE
 from servant_core.storage import (
@@ -239,7 +240,7 @@ def _read_header(path: Path, stored: np.ndarray | None) -> dict[str, Any]:
     if len(text) > MAX_HEADER_CHARS:
         raise _damaged(path, "a header longer than any model has")
     try:
-        header = json.loads(text, parse_constant=_no_nan)
+        header = json_loads(text, parse_constant=_no_nan)
     except (ValueError, RecursionError):
         raise no_header from None
     if not isinstance(header, dict) or "format" not in header or "version" not in header:
@@ -330,7 +331,7 @@ def _check_params(cls: type, params: Any, sense: str) -> None:
             low, high = PARAM_LIMITS.get(name, GENERIC_LIMIT)
             if name == "rate" and sense in SENSOR_RATE_LIMITS:
                 low, high = SENSOR_RATE_LIMITS[sense]
-            if not (math.isfinite(value) and low <= value <= high):
+            if not (is_finite_number(value) and low <= value <= high):
                 raise ValueError(f"parameter {name} is {value!r}, outside {low:g}–{high:g}")
 
 
@@ -338,7 +339,7 @@ def _check_numbers(name: str, values: list[Any]) -> None:
     """A short list of numbers within the parameter's limits."""
     low, high = PARAM_LIMITS.get(name, GENERIC_LIMIT)
     if len(values) > 16 or not all(
-        type(v) in (int, float) and math.isfinite(v) and low <= v <= high for v in values
+        type(v) in (int, float) and is_finite_number(v) and low <= v <= high for v in values
     ):
         raise ValueError(f"parameter {name} is {str(values)[:20]!r}")
 

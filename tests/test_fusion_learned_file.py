@@ -94,3 +94,26 @@ def test_wrong_weights_are_refused(tmp_path, net, change):
     rewrite(path, array_change=change)
     with pytest.raises(ServantError, match="damaged Servant model file.*fusion"):
         load_model_and_fusion(path)
+
+
+def test_every_number_of_the_header_beyond_floats_is_refused(tmp_path, net):
+    """Issue 24 item 3: a 400-digit integer anywhere in the header (each parameter of the
+    recogniser and of the net, `pool` and `hidden` included) is one ServantError, never an
+    OverflowError."""
+    from tests.test_fuzz_settings import number_paths
+
+    path = saved(tmp_path, net)
+    with np.load(path, allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    header = json.loads(str(arrays["header"]))
+    paths = number_paths(header)
+    assert any("pool" in p for p in paths) and any("hidden_layer_sizes" in p for p in paths)
+    for place in paths:
+        changed = json.loads(json.dumps(header))
+        node = changed
+        for key in place[:-1]:
+            node = node[key]
+        node[place[-1]] = 10**400
+        atomic_save_npz(path, {**arrays, "header": np.array(json.dumps(changed))})
+        with pytest.raises(ServantError, match="m.npz"):
+            load_model_and_fusion(path)

@@ -29,6 +29,7 @@ from threadpoolctl import threadpool_limits
 
 from servant_core.actions.records import SENSES, TeachRecord, label_scores
 from servant_core.errors import ServantError
+from servant_core.numbers import json_loads
 from servant_core.recognisers.base import UNKNOWN
 from servant_core.storage import (
     atomic_save_npz,
@@ -282,7 +283,7 @@ class ActionLearner:
         try:
             with np.load(path, allow_pickle=False) as npz:
                 arrays = {name: npz[name] for name in npz.files}
-            header = json.loads(str(arrays.pop("header")))
+            header = json_loads(str(arrays.pop("header")))
             fmt, version = header["format"], header["version"]
         except (
             OSError,

@@ -11,14 +11,20 @@ It becomes a pose for one joint (`legacy_joint`) and certain scores for its scen
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 from servant_core.errors import ServantError
-from servant_core.storage import atomic_write_bytes, atomic_write_text, data_dir, os_reason
+from servant_core.numbers import is_finite_number, json_loads
+from servant_core.storage import (
+    atomic_write_bytes,
+    atomic_write_text,
+    data_dir,
+    os_reason,
+    read_bounded_bytes,
+)
 
 FORMAT = "servant-teach-records"
 VERSION = 2
@@ -61,11 +67,7 @@ def _finite_map(value: Any, what: str) -> dict[str, float]:
         raise ValueError(f"{what} must be a non-empty object of numbers")
     out = {}
     for key, number in value.items():
-        if (
-            isinstance(number, bool)
-            or not isinstance(number, int | float)
-            or not math.isfinite(number)
-        ):
+        if not is_finite_number(number):
             raise ValueError(f"{what}[{key!r}] is not a finite number")
         out[str(key)] = float(number)
     return out
@@ -84,7 +86,7 @@ def _record(raw: Any) -> TeachRecord:
     if source not in SOURCES:
         raise ValueError(f"source {source!r} is unknown")
     t = raw.get("t", 0.0)
-    if isinstance(t, bool) or not isinstance(t, int | float) or not math.isfinite(t):
+    if not is_finite_number(t):
         raise ValueError("t is not a time")
     notes = raw.get("notes", [])
     if not isinstance(notes, list) or not all(isinstance(n, str) for n in notes):
@@ -115,15 +117,14 @@ def _migrate_v1(raw_records: Sequence[Any], legacy_joint: str) -> list[dict[str,
 
 def _read(path: Path, legacy_joint: str) -> tuple[int, list[TeachRecord]]:
     fix = "fix or move the file away (Servant never overwrites it)"
+    text = read_bounded_bytes(path, "teach record file", MAX_FILE_BYTES)
     try:
-        if path.stat().st_size > MAX_FILE_BYTES:
-            raise ServantError(f"{path}: too big for a teach record file; {fix}")
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = json_loads(text.decode("utf-8"))
     except RecursionError as exc:
         raise ServantError(
             f"{path}: not a readable teach record file (nested too deeply); {fix}"
         ) from exc
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (UnicodeDecodeError, ValueError) as exc:
         raise ServantError(f"{path}: not a readable teach record file ({exc}); {fix}") from exc
     if not isinstance(data, Mapping) or data.get("format") != FORMAT:
         raise ServantError(f"{path}: not a Servant teach record file; {fix}")

@@ -36,6 +36,7 @@ from servant_core.capture.replay import Clip, PacedAudio
 from servant_core.capture.sensors import CHANNELS, RATES
 from servant_core.capture.source import ManualClock
 from servant_core.errors import ServantError
+from servant_core.numbers import MAX_STAMP
 from servant_core.senses import SAMPLE_SENSES
 from servant_core.storage import atomic_write_text, open_regular_file, os_reason
 
@@ -126,11 +127,15 @@ def read_sample_csv(path: str | Path, kind: str) -> SampleLog:
 
 
 def _stamp(text: str) -> int | float:
-    """A time stamp: an integer kept exact, else a float."""
+    """A time stamp: an integer kept exact, else a float; ValueError beyond 64 bits (no unit
+    of a logger's clock needs more, and the differences of larger ones overflow floats)."""
     try:
-        return int(text)
+        stamp: int | float = int(text)
     except ValueError:
-        return float(text)
+        stamp = float(text)
+    if not -MAX_STAMP < stamp < MAX_STAMP:
+        raise ValueError(f"time stamp {text[:20]} out of range")
+    return stamp
 
 
 def _columns(

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from servant_core.errors import ServantError
+from servant_core.numbers import MAX_STAMP
 from servant_core.servo.link import PORT_ERRORS, open_serial
 
 IMU_CHANNELS = ("ax", "ay", "az", "gx", "gy", "gz")
@@ -69,7 +70,7 @@ def parse_line(line: bytes) -> SensorLine | None:
         raise ValueError(f"{len(fields)} fields, not {2 + len(channels)}")
     millis = int(fields[1])
     values = tuple(float(f) for f in fields[2:])
-    if millis < 0 or not all(math.isfinite(v) for v in values):
+    if not 0 <= millis < MAX_STAMP or not all(math.isfinite(v) for v in values):
         raise ValueError("a negative time or a value that is not finite")
     return SensorLine(kind, millis, values)
 
