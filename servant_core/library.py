@@ -21,6 +21,7 @@ from servant_core.audio import (
     read_audio,
 )
 from servant_core.errors import ServantError
+from servant_core.features.rows import usable_rows
 from servant_core.senses import PICTURE_SUFFIXES, SAMPLE_SENSES, UNKNOWN
 from servant_core.storage import open_regular_file, os_reason
 
@@ -181,10 +182,20 @@ def featurize_recordings(
     for index, recording, windows in iter_recording_windows(
         recordings, rate, seconds, on_error, on_progress
     ):
-        parts.append(featurize(windows))
-        scenes += [recording.scene] * len(windows)
-        rec_ids += [index] * len(windows)
-        positions += range(len(windows))
+        X = featurize(windows)
+        usable = usable_rows(X)
+        if not np.all(usable):
+            error = ServantError(
+                f"{recording.path}: {np.count_nonzero(~usable)} of {len(usable)} windows give "
+                "features that are not finite numbers; the file is damaged, record it again"
+            )
+            if on_error is None:
+                raise error
+            on_error(error)  # and the recording's other windows are used
+        parts.append(X[usable])
+        scenes += [recording.scene] * int(np.count_nonzero(usable))
+        rec_ids += [index] * int(np.count_nonzero(usable))
+        positions += np.flatnonzero(usable).tolist()
     if not parts:
         raise ServantError("no usable recording: every audio file was unreadable or too short")
     return WindowFeatures(

@@ -33,7 +33,7 @@ import numpy as np
 
 from servant_core.audio import DEFAULT_WINDOW_SECONDS
 from servant_core.capture.replay import Clip, PacedAudio
-from servant_core.capture.sensors import CHANNELS, RATES
+from servant_core.capture.sensors import CHANNELS, RATES, rows_in_range
 from servant_core.capture.source import ManualClock
 from servant_core.errors import ServantError
 from servant_core.numbers import MAX_STAMP
@@ -121,8 +121,16 @@ def read_sample_csv(path: str | Path, kind: str) -> SampleLog:
     # integers but lose a quarter of a microsecond as floats
     t = np.asarray([stamp - first for stamp in times], dtype=np.float64)
     order = np.argsort(t, kind="stable")
-    t = t[order]
     v = np.asarray(values, dtype=np.float64)[order] * np.asarray(factors)
+    # in range in the format's units, after the unit's conversion, before the cast to float32
+    usable = rows_in_range(v, kind)
+    if np.count_nonzero(usable) < 2:
+        raise ServantError(
+            f"{path}: fewer than two readings within what a {kind} sensor reads; "
+            "check the columns' units"
+        )
+    t, v = t[order][usable], v[usable]
+    skipped += len(usable) - int(np.count_nonzero(usable))
     return SampleLog(_seconds(t, time_unit), v.astype(np.float32), skipped)
 
 

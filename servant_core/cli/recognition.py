@@ -8,6 +8,8 @@ from collections import Counter
 from pathlib import Path
 from typing import Any, cast
 
+import numpy as np
+
 from servant_core.audio import DEFAULT_RATE, DEFAULT_WINDOW_SECONDS, cut_windows, read_audio
 from servant_core.cli import emit, one_line, options
 from servant_core.engine import FRESH_METHODS, decision_unit
@@ -28,6 +30,7 @@ from servant_core.evaluate import (
     said_of,
 )
 from servant_core.event_text import confidence_text, place
+from servant_core.features.rows import checked_rows, usable_rows
 from servant_core.fusion import POLICIES, FusionConfig, LearnedFusion
 from servant_core.library import SceneLibrary, featurize_recordings, read_picture, read_pictures
 from servant_core.modelfile import check_model_output, load_model_and_fusion, save_model
@@ -375,16 +378,28 @@ def cmd_predict(args: argparse.Namespace) -> int:
                 f"{args.audio}: shorter than one {seconds:g} s window; record longer"
             )
         X = audio.featurize(windows)
+        usable = usable_rows(X)
+        if not np.any(usable):
+            raise ServantError(
+                f"{args.audio}: no window gives features that are finite numbers; "
+                "the file is damaged, record it again"
+            )
+        if not np.all(usable):
+            _warn(
+                ServantError(
+                    f"{args.audio}: windows {', '.join(map(str, np.flatnonzero(~usable)))}: "
+                    "features not finite numbers"
+                )
+            )
+        X = X[usable]
         scenes, confidences = audio.predict(X), audio.confidence(X)
         unit = audio.confidence_unit
+        judged = list(zip(np.flatnonzero(usable).tolist(), scenes, confidences, strict=True))
         result["acoustic"] = [
             {"window": i, "scene": str(s), "confidence": float(c), "confidence_unit": unit}
-            for i, (s, c) in enumerate(zip(scenes, confidences, strict=True))
+            for i, s, c in judged
         ]
-        lines += [
-            f"Acoustic window {i}: {_judged(str(s), float(c), unit)}"
-            for i, (s, c) in enumerate(zip(scenes, confidences, strict=True))
-        ]
+        lines += [f"Acoustic window {i}: {_judged(str(s), float(c), unit)}" for i, s, c in judged]
         first_acoustic = (
             str(scenes[0]),
             float(confidences[0]),
@@ -393,7 +408,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
     visual_predictions: list[Said] = []
     if args.image:
         visual = _role(model, "visual", args.model)
-        X = visual.featurize([read_picture(p) for p in args.image])
+        X = checked_rows(visual.featurize([read_picture(p) for p in args.image]), "pictures")
         visual_predictions = said_of(visual, X)
         unit = visual.confidence_unit
         result["visual"] = [

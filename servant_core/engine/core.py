@@ -56,6 +56,7 @@ from servant_core.events import (
     VisualPrediction,
 )
 from servant_core.features.palette import dominant_colours
+from servant_core.features.rows import UnusableWindow, checked_rows
 from servant_core.fusion import FusionConfig, FusionPolicy, LearnedFusion, SequentialFusion
 from servant_core.fusion.smoothing import SceneSmoother
 from servant_core.library import SceneLibrary
@@ -190,6 +191,8 @@ class Engine:
         self._last_named: dict[str, tuple[float, str | None]] = {}
         self._scores.update({SENSES[sense].role: {} for sense in self.samples})
         self._unknowns = Unknowns()
+        # the predictions whose last window was skipped as unusable: told once, not each window
+        self._skipping: set[str] = set()
         self.sensor_port: str | None = None  # the settings' board the senses were opened on
         # the user's settings the engine was built on, the command line's overrides applied (a
         # front end starts from these, not from the file: `servant run --port P` keeps P)
@@ -351,11 +354,18 @@ class Engine:
     def _guarded(self, what: str, fn: Callable[..., None], *args: Any) -> None:
         try:
             fn(*args)
+        except UnusableWindow as error:
+            if what not in self._skipping:  # one notice for a run of such windows
+                self._skipping.add(what)
+                self._emit(Notice(self.clock(), f"{error}; more are skipped without a word"))
+            return
         except ServantError as error:
             self._error(str(error))
         except Exception as exc:  # e.g. a model trained on another window length: say it, go on
             log.debug("%s failed", what, exc_info=True)
             self._error(f"{what} failed: {type(exc).__name__}: {exc}")
+        else:
+            self._skipping.discard(what)
 
     def _on_window(self, window: np.ndarray, rate: int) -> None:
         with self._lock:
@@ -748,7 +758,9 @@ def decision_unit(*recognisers: Recogniser | None) -> str | None:
 
 
 def _predict(recogniser: Recogniser, X: np.ndarray) -> tuple[str, float, dict[str, float]]:
-    """(scene or UNKNOWN, confidence, {scene: probability}) for a single featurized row."""
+    """(scene or UNKNOWN, confidence, {scene: probability}) for a single featurized row;
+    `UnusableWindow` when the row is not finite numbers."""
+    checked_rows(X, f"{recogniser.sense} prediction")
     scene = str(recogniser.predict(X)[0])
     confidence = float(recogniser.confidence(X)[0])
     probabilities = recogniser.predict_proba(X)[0]
