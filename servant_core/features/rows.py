@@ -22,8 +22,11 @@ def usable_rows(X: np.ndarray) -> np.ndarray:
     X = np.asarray(X)
     if len(X) == 0:
         return np.zeros(0, dtype=bool)
-    flat = X.reshape(len(X), -1)
-    return np.all(np.abs(flat) <= FEATURE_LIMIT, axis=1)
+    if X.dtype.kind in "biu":  # whole numbers are finite, and a feature never that large
+        return np.ones(len(X), dtype=bool)
+    # in the rows' own type (float16 descriptors cannot hold the limit itself)
+    limit = min(FEATURE_LIMIT, float(np.finfo(X.dtype).max))
+    return np.all(np.abs(X.reshape(len(X), -1)) <= limit, axis=1)
 
 
 class UnusableWindow(ServantError):
