@@ -17,6 +17,8 @@ from typing import Self
 
 from servant_core.errors import ServantError
 
+PTY_FOLDER = "/dev/pts/"  # where Linux's pseudo-terminals are (what a stale link points to)
+
 
 class PtyPort:
     def __init__(self, link: str | Path | None = None) -> None:
@@ -53,9 +55,17 @@ class PtyPort:
 
 
 def _make_link(path: Path, device: str) -> Path:
-    """Make `path` a symlink to `device`, atomically. Only a symlink may be replaced (a stale
-    one from an earlier run): any other file there is the user's, and is left alone."""
-    if path.exists() and not path.is_symlink():
+    """Make `path` a symlink to `device`, atomically. Only a stale link of an earlier run (to a
+    pseudo-terminal, or to nothing) may be replaced: any other file or link there is the
+    user's, and is left alone."""
+    if path.is_symlink():
+        stale = not path.exists() or os.readlink(path).startswith(PTY_FOLDER)
+        if not stale:
+            raise ServantError(
+                f"{path}: is a link to {os.readlink(path)}, not to a pseudo-terminal, so it is "
+                "not replaced; give a new name for the link, or remove it first"
+            )
+    elif path.exists():
         raise ServantError(
             f"{path}: exists and is not a link, so it is not replaced; "
             "give a new name for the link, or remove the file first"
