@@ -31,6 +31,11 @@ VERSION = 2
 SENSES = ("acoustic", "visual")
 SOURCES = ("typed", "recorded", "perceived")
 MAX_FILE_BYTES = 64 << 20  # some 300,000 records: far more than anyone teaches
+# The action learner reads two scores a scene for each record: 20,000 scenes once asked for
+# 3.5 GB. A wearer teaches dozens of places and some hundreds of records; these bound the
+# learner's table to some 160 MB.
+MAX_SCENES = 500
+MAX_RECORDS = 20_000
 
 
 @dataclass(frozen=True)
@@ -65,6 +70,8 @@ def default_records_path() -> Path:
 def _finite_map(value: Any, what: str) -> dict[str, float]:
     if not isinstance(value, Mapping) or not value:
         raise ValueError(f"{what} must be a non-empty object of numbers")
+    if len(value) > MAX_SCENES:
+        raise ValueError(f"{what} has more than {MAX_SCENES} entries")
     out = {}
     for key, number in value.items():
         if not is_finite_number(number):
@@ -140,13 +147,28 @@ def _read(path: Path, legacy_joint: str) -> tuple[int, list[TeachRecord]]:
         raise ServantError(f"{path}: no list of records; {fix}")
     if version == 1:
         raw_records = _migrate_v1(raw_records, legacy_joint)
+    if len(raw_records) > MAX_RECORDS:
+        raise ServantError(f"{path}: more than {MAX_RECORDS:,} records; {fix}")
     records = []
     for i, raw in enumerate(raw_records):
         try:
             records.append(_record(raw))
         except ValueError as exc:
             raise ServantError(f"{path}: record {i + 1}: {exc}; {fix}") from exc
+    _check_bounds(path, records, fix)
     return version, records
+
+
+def _check_bounds(path: Path, records: Sequence[TeachRecord], fix: str) -> None:
+    """At most `MAX_RECORDS` records over at most `MAX_SCENES` scenes (labels and scored)."""
+    if len(records) > MAX_RECORDS:
+        raise ServantError(f"{path}: more than {MAX_RECORDS:,} records; {fix}")
+    scenes = {r.scene for r in records}
+    for record in records:
+        for scores in record.scores.values():
+            scenes.update(scores)
+        if len(scenes) > MAX_SCENES:
+            raise ServantError(f"{path}: records name more than {MAX_SCENES} scenes; {fix}")
 
 
 def load_records(
@@ -200,5 +222,6 @@ def append_record(
                     "was changed; check that the folder can be written to and has space"
                 ) from None
     records.append(record)
+    _check_bounds(path, records, "nothing was added; start another record file")
     save_records(records, path)
     return records
