@@ -23,7 +23,7 @@ from servant_core.audio import (
 from servant_core.errors import ServantError
 from servant_core.features.rows import usable_rows
 from servant_core.senses import PICTURE_SUFFIXES, SAMPLE_SENSES, UNKNOWN
-from servant_core.storage import open_regular_file, os_reason
+from servant_core.storage import open_regular_file, os_reason, walk_files
 
 # A webcam frame is under 1 Mpx and a phone photo under 50 Mpx; a header claiming more is
 # damaged or hostile (a 1 MB PNG can claim gigabytes). Checked before decoding.
@@ -91,7 +91,7 @@ class SceneLibrary:
                     "and can never be detected; rename the folder"
                 )
             scenes.append(scene_dir.name)
-            for path in sorted(scene_dir.rglob("*")):
+            for path in walk_files(scene_dir):
                 if path.name.startswith(".") or not path.is_file():
                     continue
                 suffix = path.suffix.lower()

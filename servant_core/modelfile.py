@@ -115,9 +115,9 @@ def save_model(
 def check_model_output(path: str | Path) -> Path:
     """`path` if a model may be saved there: not a folder, nor a file that is not a model."""
     path = Path(path)
+    check_replaceable(path, "model file", is_servant_npz)
     if path.is_dir():
         raise ServantError(f"{path}: is a folder; give a model file name such as {path}/model.npz")
-    check_replaceable(path, "model file", is_servant_npz)
     return path
 
 
@@ -146,7 +146,27 @@ def load_model_and_fusion(path: str | Path) -> tuple[dict[str, Recogniser], Fusi
     fusion = header.get(FUSION)
     if fusion is None:
         return recognisers, None
-    return recognisers, _fusion_net(path, fusion, _parts(files, FUSION))
+    net = _fusion_net(path, fusion, _parts(files, FUSION))
+    _check_net_fits(path, net, recognisers)
+    return recognisers, net
+
+
+def _check_net_fits(path: Path, net: FusionNet, recognisers: dict[str, Recogniser]) -> None:
+    """The net fuses the model's own recognisers: each of its senses is one of them, and each
+    scene it can decide is one they know (a net naming `office` in a cafe model would announce
+    a place no sense of the model can recognise)."""
+    senses = {r.sense for r in recognisers.values()}
+    scenes = {scene for r in recognisers.values() for scene in r.scenes_}
+    foreign = [s for s in net.senses_ if s not in senses]
+    if foreign:
+        raise _damaged(
+            path, f"{FUSION}: it fuses {str(foreign[0])[:40]!r}, a sense the model lacks"
+        )
+    unknown = [s for s in net.scenes_ if s not in scenes]
+    if unknown:
+        raise _damaged(
+            path, f"{FUSION}: it decides {str(unknown[0])[:40]!r}, a scene no recogniser knows"
+        )
 
 
 def _parts(files: dict[str, np.ndarray], role: str) -> dict[str, np.ndarray]:

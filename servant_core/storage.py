@@ -100,6 +100,10 @@ def atomic_save_npz(path: str | os.PathLike[str], arrays: dict[str, np.ndarray])
     return atomic_write_bytes(path, buffer.getvalue())
 
 
+# Linux and macOS allow 255 bytes a name; the temporary file `.NAME.XXXXXXXX.tmp` adds 14.
+MAX_NAME_BYTES = 255 - 14
+
+
 def check_replaceable(
     path: str | os.PathLike[str], what: str, is_kind: Callable[[Path], bool]
 ) -> None:
@@ -110,6 +114,11 @@ def check_replaceable(
     from servant_core.senses import sense_of_file  # senses needs audio, which needs storage
 
     path = Path(path)
+    if len(os.fsencode(path.name)) > MAX_NAME_BYTES:
+        raise ServantError(
+            f"{str(path)[:60]}...: a file name of {len(os.fsencode(path.name))} bytes is longer "
+            f"than {MAX_NAME_BYTES}; choose a shorter name"
+        )
     sense = sense_of_file(path.name)
     if sense is not None:
         raise ServantError(
@@ -192,3 +201,41 @@ def _article(what: str) -> str:
 def os_reason(exc: OSError) -> str:
     """The operating system's short reason ("Permission denied"), not the whole repr."""
     return exc.strerror or type(exc).__name__
+
+
+# A scene library keeps its files a few folders below each scene; hundreds of levels are a
+# mistake or an attack (1,100 levels once exhausted Python's recursion in `Path.rglob`).
+MAX_FOLDER_DEPTH = 64
+
+
+def walk_files(folder: str | os.PathLike[str], max_depth: int = MAX_FOLDER_DEPTH) -> list[Path]:
+    """Every file below `folder` (following links to folders, each folder visited once: a link
+    back up is no loop), sorted; without recursion, so depth costs no stack. A folder deeper
+    than `max_depth` is one ServantError; an OSError reading a folder propagates."""
+    root = Path(folder)
+    files: list[Path] = []
+    seen: set[tuple[int, int]] = set()
+    pending: list[tuple[Path, int]] = [(root, 0)]
+    while pending:
+        current, depth = pending.pop()
+        info = os.stat(current)
+        if (info.st_dev, info.st_ino) in seen:
+            continue
+        seen.add((info.st_dev, info.st_ino))
+        with os.scandir(current) as entries:
+            for entry in entries:
+                path = current / entry.name
+                try:
+                    is_dir = entry.is_dir()
+                except OSError:
+                    continue  # e.g. a link to a folder that cannot be read: not a file either
+                if not is_dir:
+                    files.append(path)
+                elif depth + 1 > max_depth:
+                    raise ServantError(
+                        f"{root}: folders nested more than {max_depth} levels deep "
+                        f"({str(path)[:80]}...); move the files nearer the top"
+                    )
+                else:
+                    pending.append((path, depth + 1))
+    return sorted(files)
