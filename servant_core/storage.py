@@ -7,6 +7,7 @@ import json
 import os
 import stat
 import tempfile
+import time
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
@@ -47,6 +48,7 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(path)
     try:
         old_mode: int | None = stat.S_IMODE(os.stat(path).st_mode)
     except OSError:
@@ -65,6 +67,33 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
         raise
     _sync_directory(path.parent)
     return path
+
+
+# A write takes seconds at most; a temporary this old was left by a process killed mid-write.
+STALE_TEMPORARY_SECONDS = 3600.0
+
+
+def remove_stale_temporaries(path: Path, now: float | None = None) -> list[Path]:
+    """Remove the temporaries of earlier writes of `path` (`.NAME.XXXXXXXX.tmp`, as
+    `atomic_write_bytes` names them) that a killed process left, an hour old or more; a
+    temporary of a write going on now is younger and kept. Returns those removed."""
+    now = time.time() if now is None else now
+    prefix, removed = f".{path.name}.", []
+    try:
+        entries = list(os.scandir(path.parent))
+    except OSError:
+        return removed
+    for entry in entries:
+        name = entry.name
+        if not (name.startswith(prefix) and name.endswith(".tmp")):
+            continue
+        if len(name) != len(prefix) + 8 + len(".tmp"):  # mkstemp's 8 characters, no other file
+            continue
+        with contextlib.suppress(OSError):
+            if now - entry.stat(follow_symlinks=False).st_mtime >= STALE_TEMPORARY_SECONDS:
+                os.unlink(entry.path)
+                removed.append(Path(entry.path))
+    return removed
 
 
 def _sync_directory(folder: Path) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import stat
+import time
 from pathlib import Path
 
 import pytest
@@ -117,3 +118,20 @@ def test_the_action_learner_refuses_a_file_that_is_not_one(tmp_path: Path) -> No
     assert precious.read_bytes() == PRECIOUS
     learner.save(tmp_path / "fresh.npz")
     learner.save(tmp_path / "fresh.npz")  # its own kind: replaced
+
+
+def test_a_save_removes_the_temporaries_a_killed_save_left(tmp_path: Path) -> None:
+    """Issue 24 item 8: a kill during a save left `.model.npz.XXXXXXXX.tmp`, and nothing ever
+    removed it. The next save of that file removes those an hour old; a write going on now
+    (a younger one) and files of other names are kept."""
+    model = tmp_path / "model.npz"
+    stale, fresh = tmp_path / ".model.npz.ab12cd34.tmp", tmp_path / ".model.npz.ef56gh78.tmp"
+    other = tmp_path / ".model.npz.my-own-notes.tmp"
+    for path in (stale, fresh, other):
+        path.write_bytes(PRECIOUS)
+    hours_ago = time.time() - 7200
+    os.utime(stale, (hours_ago, hours_ago))
+    os.utime(other, (hours_ago, hours_ago))
+    atomic_write_bytes(model, b"model")
+    assert not stale.exists() and fresh.exists() and other.read_bytes() == PRECIOUS
+    assert model.read_bytes() == b"model"
