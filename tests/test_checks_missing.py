@@ -4,12 +4,14 @@ test_fusion_learned_file.py), a camera index beyond any (in test_special_files.p
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import pytest
 
 from servant_core.capture.sensor_sources import sensor_sources
 from servant_core.errors import ServantError
+from servant_core.modelfile import load_model
 from servant_core.storage import MAX_FOLDER_DEPTH, walk_files
 from tests.cli_harness import assert_refused, run_cli
 from tests.test_cli_boundaries import SMALL_AUDIO, audio_library, picture_library
@@ -71,3 +73,30 @@ def test_an_output_name_too_long_for_the_file_system_is_one_line(tmp_path: Path)
     outcome = run_cli("train", str(lib), "-o", str(tmp_path / ("m" * 300 + ".npz")), *SMALL_AUDIO)
     assert_refused(outcome, "shorter name")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["lib"]
+
+
+def test_skip_bad_leaves_out_a_sense_whose_only_log_of_a_scene_is_bad(tmp_path: Path) -> None:
+    """Issue 24 item 8: the bad file was gym's only motion log; --skip-bad aborted the whole
+    train, though the recordings could train."""
+    lib = audio_library(tmp_path / "lib")
+    rows = "".join(f"{i * 0.01:.2f},0,0,9.8,0,0,{i % 7}\n" for i in range(300))
+    (lib / "cafe" / "walk.imu.csv").write_text("time,ax,ay,az,gx,gy,gz\n" + rows)
+    (lib / "gym" / "lift.imu.csv").write_text("not,a,motion,log\n1,2,3,4\n")
+    model = tmp_path / "m.npz"
+    assert_refused(run_cli("train", str(lib), "-o", str(model), *SMALL_AUDIO), "lift.imu.csv")
+    outcome = run_cli("train", str(lib), "-o", str(model), *SMALL_AUDIO, "--skip-bad")
+    assert outcome.code == 0, outcome.err
+    assert "motion: not trained" in outcome.err and "acoustic:" in outcome.out
+    assert set(load_model(model)) == {"acoustic"}
+
+
+@pytest.mark.parametrize("typed", ["cafe\n", "\n", ""])
+def test_teach_without_a_scene_taught_is_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, typed: str
+) -> None:
+    """Issue 24 item 8: input ending before an action, or a blank label first, exited 1."""
+    monkeypatch.setattr("sys.stdin", io.StringIO(typed))
+    records, learner = tmp_path / "records.json", tmp_path / "learner.npz"
+    outcome = run_cli("teach", "--records", str(records), "--learner", str(learner))
+    assert_refused(outcome, "nothing to learn from")
+    assert not learner.exists()

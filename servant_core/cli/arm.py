@@ -274,10 +274,7 @@ def run_teach(
         if args.predict_only:
             learner = ActionLearner.load(learner_path)
         else:
-            trained = _train(args, settings, session, joint, records_path, link)
-            if trained is None:
-                return 1
-            learner = trained
+            learner = _train(args, settings, session, joint, records_path, link)
             learner.save(learner_path)
         _predict(learner, session, link)
     finally:
@@ -293,7 +290,7 @@ def _train(
     joint: str,
     records_path: str | Path,
     link: ServoLink | None,
-) -> ActionLearner | None:
+) -> ActionLearner:
     joints = {j.name: j for j in settings.joints}
     records = load_records(records_path, legacy_joint=joint)
     if records:
@@ -314,9 +311,11 @@ def _train(
         records = append_record(record, records_path, legacy_joint=joint)
         if link is not None and link.armed:
             _act(link, pose, session.say)
-    if not records:
-        session.say("Nothing to learn from: teach at least one scene.")
-        return None
+    if not records:  # the input ended (or an empty label came) before any scene was taught
+        raise ServantError(
+            "nothing to learn from: teach at least one scene (a label, then its action), "
+            "or ask a learner taught before with --predict-only"
+        )
     session.say(f"Learning from {len(records)} teach records...")
     learner = ActionLearner(
         max_iter=args.iterations,

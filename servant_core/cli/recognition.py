@@ -306,14 +306,21 @@ def cmd_train(args: argparse.Namespace) -> int:
         if len({f.scene for f in files}) < 2:
             continue
         stream = SAMPLE_SENSES[sense].stream
-        model = refit_samples(
-            files,
-            stream or sense,
-            make_recogniser(sense, FRESH_METHODS[sense]),
-            args.window,
-            on_error or _raise,
-            Progress(f"reading {sense} logs"),
-        )
+        try:
+            model = refit_samples(
+                files,
+                stream or sense,
+                make_recogniser(sense, FRESH_METHODS[sense]),
+                args.window,
+                on_error or _raise,
+                Progress(f"reading {sense} logs"),
+            )
+        except ServantError as error:
+            if on_error is None:
+                raise
+            # e.g. the bad log was a scene's only one: this sense is left out, the others train
+            on_error(ServantError(f"{sense}: not trained: {error}"))
+            model = None
         if model is not None:
             recognisers[sense] = model
             summary[sense] = {"method": model.method, "scenes": model.scenes_}
