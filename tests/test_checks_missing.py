@@ -100,3 +100,13 @@ def test_teach_without_a_scene_taught_is_one_line(
     outcome = run_cli("teach", "--records", str(records), "--learner", str(learner))
     assert_refused(outcome, "nothing to learn from")
     assert not learner.exists()
+
+
+def test_one_identical_picture_per_scene_is_one_line(tmp_path: Path) -> None:
+    """Issue 24 item 7: fisher-bovw failed with `Found array with 0 feature(s)`."""
+    lib = picture_library(tmp_path / "lib", per_scene=1)
+    (lib / "gym" / "p0.png").write_bytes((lib / "cafe" / "p0.png").read_bytes())
+    outcome = run_cli(
+        "train", str(lib), "-o", str(tmp_path / "m.npz"), "--image-method", "fisher-bovw"
+    )
+    assert_refused(outcome, "no scene can be told from another")
