@@ -154,12 +154,16 @@ def check_replaceable(
             f"{path}: a scene library reads a file of this name as {sense.name} data; "
             f"give the {what} a name ending in .npz"
         )
-    if path.is_symlink():
-        raise ServantError(
-            f"{path}: is a symbolic link; give the file's own path "
-            f"({os.path.realpath(path)}) or another name"
-        )
-    if path.exists() and not path.is_dir() and not is_kind(path):
+    try:
+        if path.is_symlink():
+            raise ServantError(
+                f"{path}: is a symbolic link; give the file's own path "
+                f"({os.path.realpath(path)}) or another name"
+            )
+        exists = path.exists() and not path.is_dir()
+    except OSError as exc:  # e.g. a folder on the way that cannot be searched
+        raise ServantError(f"{path}: cannot write the {what} there ({os_reason(exc)})") from None
+    if exists and not is_kind(path):
         raise ServantError(
             f"{path}: exists and is not {_article(what)}, so it is not overwritten; "
             "move it away or choose another name"
