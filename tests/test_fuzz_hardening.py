@@ -200,7 +200,7 @@ def test_fuzz_sensor_logs_are_finite_and_in_range_or_one_line(tmp_path_factory, 
     assert np.all(log.values >= limits[:, 0] - 1e-3) and np.all(log.values <= limits[:, 1] * 1.001)
 
 
-@fuzz(400)
+@fuzz(700)
 @given(kind=st.sampled_from(["I", "A"]), fields=st.lists(extreme_numbers, min_size=1, max_size=9))
 def test_fuzz_board_lines_parse_in_range_or_are_refused(kind: str, fields: list[str]) -> None:
     try:
