@@ -2,17 +2,17 @@
 
 from __future__ import annotations
 
-import os
-import stat
+from collections.abc import Callable
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any, BinaryIO, TypeVar
 
 import numpy as np
 import soundfile as sf
 from scipy.signal import resample_poly
 
 from servant_core.errors import ServantError
+from servant_core.storage import atomic_write_bytes, open_regular_file, os_reason
 
 AUDIO_SUFFIXES = (".wav", ".flac", ".ogg", ".mp3")
 DEFAULT_RATE = 44100
@@ -27,12 +27,22 @@ MAX_RECORDING_SECONDS = 600.0
 MIN_WINDOW_SECONDS = 0.5
 MAX_WINDOW_SECONDS = 60.0
 BLOCK_FRAMES = 1 << 16
+T = TypeVar("T")
+# Full scale is ±1. A float file may go beyond it (a mix not normalised), but not a thousand
+# times: such samples (a float32 file at its maximum, a damaged MP3 frame) overflow the
+# features' squares and sums into infinity and NaN.
+MAX_AMPLITUDE = 1000.0
 
 
 def to_mono(samples: np.ndarray) -> np.ndarray:
     """Average the channels of a (frames, channels) array; a 1-D array is already mono."""
     samples = np.asarray(samples, dtype=np.float32)
     return samples if samples.ndim == 1 else samples.mean(axis=1, dtype=np.float32)
+
+
+def samples_in_range(samples: np.ndarray) -> bool:
+    """Every sample a number within ±`MAX_AMPLITUDE` (NaN is not)."""
+    return bool(np.all(np.abs(samples) <= MAX_AMPLITUDE))
 
 
 def resample(signal: np.ndarray, rate_in: int, rate_out: int) -> np.ndarray:
@@ -52,36 +62,73 @@ def read_audio(path: str | Path, rate: int = DEFAULT_RATE) -> np.ndarray:
     memory holds one mono copy at the file's rate and one at `rate`.
     """
     path = Path(path)
-    with open_regular_file(path, "audio file") as handle:
+
+    def decode(handle: Any) -> tuple[Any, np.ndarray]:
         info = _checked_info(path, handle)
         handle.seek(0)
-        mono = _decode_mono(path, handle, info)
+        return info, _decode_mono(path, handle, info)
+
+    info, mono = _through_callbacks(path, decode)
     return resample(mono, info.samplerate, rate)
 
 
-def open_regular_file(path: Path, what: str) -> BinaryIO:
-    """Open a file for reading in Python (any file name works, even one that is not UTF-8);
-    a missing file, a folder, a FIFO or a device is refused without blocking on it."""
-    try:
-        if not stat.S_ISREG(os.stat(path).st_mode):
-            raise ServantError(f"{path}: not a regular file; give an {what}")
-        return open(path, "rb")
-    except FileNotFoundError:
-        raise ServantError(f"{path}: no such file; check the path") from None
-    except OSError as exc:
-        raise ServantError(f"{path}: cannot open the {what} ({os_reason(exc)})") from None
+class _ErrorsKept:
+    """A file as libsndfile reads it, through callbacks an exception cannot pass (C is between):
+    Python would print each as `Exception ignored from cffi callback` and a traceback, a dozen
+    lines over the terminal, before libsndfile's own error. An I/O error (EIO from a failing
+    disk) is kept here instead, the read answered as the end of the file, and the error raised
+    by `raise_kept` once libsndfile has returned."""
+
+    def __init__(self, handle: BinaryIO) -> None:
+        self.handle = handle
+        self.error: OSError | None = None
+
+    def _kept(self, call: Callable[[], Any], fallback: Any) -> Any:
+        try:
+            return call()
+        except OSError as exc:
+            self.error = self.error or exc
+            return fallback
+
+    def readinto(self, buffer: Any) -> int:
+        return int(self._kept(lambda: self.handle.readinto(buffer), 0))  # type: ignore[attr-defined]
+
+    def read(self, size: int = -1) -> bytes:
+        return bytes(self._kept(lambda: self.handle.read(size), b""))
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        return int(self._kept(lambda: self.handle.seek(offset, whence), 0))
+
+    def tell(self) -> int:
+        return int(self._kept(self.handle.tell, 0))
+
+    def raise_kept(self, path: Path) -> None:
+        if self.error is not None:
+            raise ServantError(
+                f"{path}: cannot read the audio file ({os_reason(self.error)}); check the disk, "
+                "or copy the file again"
+            ) from None
 
 
-def os_reason(exc: OSError) -> str:
-    """The operating system's short reason ("Permission denied"), not the whole repr."""
-    return exc.strerror or type(exc).__name__
+def _through_callbacks(path: Path, use: Callable[[Any], T]) -> T:
+    """`use(file)` on the audio file opened for libsndfile; an I/O error while it reads is one
+    ServantError, said before whatever libsndfile made of the short read."""
+    with open_regular_file(path, "audio file") as handle:
+        source = _ErrorsKept(handle)
+        try:
+            result = use(source)
+        except ServantError:
+            source.raise_kept(path)
+            raise
+        source.raise_kept(path)
+        return result
 
 
 def _not_readable(path: Path, reason: str) -> ServantError:
     return ServantError(f"{path}: not a readable audio file ({reason}); use WAV, FLAC, OGG or MP3")
 
 
-def _checked_info(path: Path, handle: BinaryIO) -> Any:
+def _checked_info(path: Path, handle: Any) -> Any:
     try:
         info = sf.info(handle)
     except (sf.LibsndfileError, RuntimeError, ValueError, TypeError) as exc:
@@ -108,7 +155,7 @@ def _too_long(path: Path) -> ServantError:
     )
 
 
-def _decode_mono(path: Path, handle: BinaryIO, info: Any) -> np.ndarray:
+def _decode_mono(path: Path, handle: Any, info: Any) -> np.ndarray:
     """Decode block by block into one mono array sized from the header (a list of blocks and
     their concatenation would hold the recording twice); a header that under-states the
     length still gets the rest, up to the limit."""
@@ -123,6 +170,11 @@ def _decode_mono(path: Path, handle: BinaryIO, info: Any) -> np.ndarray:
                 if not np.all(np.isfinite(samples)):
                     raise ServantError(
                         f"{path}: holds samples that are not numbers (NaN or infinity); "
+                        "the file is damaged, record it again"
+                    )
+                if not samples_in_range(samples):
+                    raise ServantError(
+                        f"{path}: holds samples beyond ±{MAX_AMPLITUDE:g} times full scale; "
                         "the file is damaged, record it again"
                     )
                 if decoded + len(samples) > limit:
@@ -162,16 +214,13 @@ def cut_windows(
 def duration_seconds(path: str | Path) -> float:
     """Length of an audio file from its header, without decoding it."""
     path = Path(path)
-    with open_regular_file(path, "audio file") as handle:
-        info = _checked_info(path, handle)
+    info = _through_callbacks(path, lambda handle: _checked_info(path, handle))
     return float(info.frames / info.samplerate)
 
 
 def write_wav(path: str | Path, signal: np.ndarray, rate: int) -> Path:
     """Write mono float audio as a 16-bit WAV, atomically (recordings are never half-written)."""
     import io
-
-    from servant_core.storage import atomic_write_bytes
 
     buffer = io.BytesIO()
     sf.write(buffer, np.clip(signal, -1.0, 1.0), rate, format="WAV", subtype="PCM_16")

@@ -18,12 +18,12 @@ from servant_core.audio import (
     DEFAULT_RATE,
     DEFAULT_WINDOW_SECONDS,
     cut_windows,
-    open_regular_file,
-    os_reason,
     read_audio,
 )
 from servant_core.errors import ServantError
+from servant_core.features.rows import usable_rows
 from servant_core.senses import PICTURE_SUFFIXES, SAMPLE_SENSES, UNKNOWN
+from servant_core.storage import open_regular_file, os_reason, walk_files
 
 # A webcam frame is under 1 Mpx and a phone photo under 50 Mpx; a header claiming more is
 # damaged or hostile (a 1 MB PNG can claim gigabytes). Checked before decoding.
@@ -91,7 +91,7 @@ class SceneLibrary:
                     "and can never be detected; rename the folder"
                 )
             scenes.append(scene_dir.name)
-            for path in sorted(scene_dir.rglob("*")):
+            for path in walk_files(scene_dir):
                 if path.name.startswith(".") or not path.is_file():
                     continue
                 suffix = path.suffix.lower()
@@ -182,10 +182,20 @@ def featurize_recordings(
     for index, recording, windows in iter_recording_windows(
         recordings, rate, seconds, on_error, on_progress
     ):
-        parts.append(featurize(windows))
-        scenes += [recording.scene] * len(windows)
-        rec_ids += [index] * len(windows)
-        positions += range(len(windows))
+        X = featurize(windows)
+        usable = usable_rows(X)
+        if not np.all(usable):
+            error = ServantError(
+                f"{recording.path}: {np.count_nonzero(~usable)} of {len(usable)} windows give "
+                "features that are not finite numbers; the file is damaged, record it again"
+            )
+            if on_error is None:
+                raise error
+            on_error(error)  # and the recording's other windows are used
+        parts.append(X[usable])
+        scenes += [recording.scene] * int(np.count_nonzero(usable))
+        rec_ids += [index] * int(np.count_nonzero(usable))
+        positions += np.flatnonzero(usable).tolist()
     if not parts:
         raise ServantError("no usable recording: every audio file was unreadable or too short")
     return WindowFeatures(

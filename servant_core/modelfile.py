@@ -25,14 +25,19 @@ from servant_core.audio import (
     MIN_RATE,
     MIN_WINDOW_SECONDS,
     first_line,
-    open_regular_file,
-    os_reason,
 )
 from servant_core.errors import ServantError
 from servant_core.fusion.learned import FusionNet
+from servant_core.numbers import is_finite_number, json_loads
 from servant_core.recognisers import UNKNOWN, Recogniser, methods_for
 from servant_core.senses import ROLE_SENSE
-from servant_core.storage import atomic_save_npz
+from servant_core.storage import (
+    atomic_save_npz,
+    check_replaceable,
+    is_servant_npz,
+    open_regular_file,
+    os_reason,
+)
 
 FORMAT = "servant-model"
 VERSION = 1
@@ -97,9 +102,7 @@ def save_model(
         for name, array in parts.items():
             arrays[f"{role}/{name}"] = np.asarray(array)
     arrays["header"] = np.array(json.dumps(header))
-    path = Path(path)
-    if path.is_dir():
-        raise ServantError(f"{path}: is a folder; give a model file name such as {path}/model.npz")
+    path = check_model_output(path)
     try:
         return atomic_save_npz(path, arrays)
     except OSError as exc:
@@ -107,6 +110,15 @@ def save_model(
             f"{path}: cannot save the model ({os_reason(exc)}); the previous file is unchanged, "
             "choose another place"
         ) from None
+
+
+def check_model_output(path: str | Path) -> Path:
+    """`path` if a model may be saved there: not a folder, nor a file that is not a model."""
+    path = Path(path)
+    check_replaceable(path, "model file", is_servant_npz)
+    if path.is_dir():
+        raise ServantError(f"{path}: is a folder; give a model file name such as {path}/model.npz")
+    return path
 
 
 def load_model(path: str | Path) -> dict[str, Recogniser]:
@@ -134,7 +146,27 @@ def load_model_and_fusion(path: str | Path) -> tuple[dict[str, Recogniser], Fusi
     fusion = header.get(FUSION)
     if fusion is None:
         return recognisers, None
-    return recognisers, _fusion_net(path, fusion, _parts(files, FUSION))
+    net = _fusion_net(path, fusion, _parts(files, FUSION))
+    _check_net_fits(path, net, recognisers)
+    return recognisers, net
+
+
+def _check_net_fits(path: Path, net: FusionNet, recognisers: dict[str, Recogniser]) -> None:
+    """The net fuses the model's own recognisers: each of its senses is one of them, and each
+    scene it can decide is one they know (a net naming `office` in a cafe model would announce
+    a place no sense of the model can recognise)."""
+    senses = {r.sense for r in recognisers.values()}
+    scenes = {scene for r in recognisers.values() for scene in r.scenes_}
+    foreign = [s for s in net.senses_ if s not in senses]
+    if foreign:
+        raise _damaged(
+            path, f"{FUSION}: it fuses {str(foreign[0])[:40]!r}, a sense the model lacks"
+        )
+    unknown = [s for s in net.scenes_ if s not in scenes]
+    if unknown:
+        raise _damaged(
+            path, f"{FUSION}: it decides {str(unknown[0])[:40]!r}, a scene no recogniser knows"
+        )
 
 
 def _parts(files: dict[str, np.ndarray], role: str) -> dict[str, np.ndarray]:
@@ -228,7 +260,7 @@ def _read_header(path: Path, stored: np.ndarray | None) -> dict[str, Any]:
     if len(text) > MAX_HEADER_CHARS:
         raise _damaged(path, "a header longer than any model has")
     try:
-        header = json.loads(text, parse_constant=_no_nan)
+        header = json_loads(text, parse_constant=_no_nan)
     except (ValueError, RecursionError):
         raise no_header from None
     if not isinstance(header, dict) or "format" not in header or "version" not in header:
@@ -319,7 +351,7 @@ def _check_params(cls: type, params: Any, sense: str) -> None:
             low, high = PARAM_LIMITS.get(name, GENERIC_LIMIT)
             if name == "rate" and sense in SENSOR_RATE_LIMITS:
                 low, high = SENSOR_RATE_LIMITS[sense]
-            if not (math.isfinite(value) and low <= value <= high):
+            if not (is_finite_number(value) and low <= value <= high):
                 raise ValueError(f"parameter {name} is {value!r}, outside {low:g}–{high:g}")
 
 
@@ -327,7 +359,7 @@ def _check_numbers(name: str, values: list[Any]) -> None:
     """A short list of numbers within the parameter's limits."""
     low, high = PARAM_LIMITS.get(name, GENERIC_LIMIT)
     if len(values) > 16 or not all(
-        type(v) in (int, float) and math.isfinite(v) and low <= v <= high for v in values
+        type(v) in (int, float) and is_finite_number(v) and low <= v <= high for v in values
     ):
         raise ValueError(f"parameter {name} is {str(values)[:20]!r}")
 

@@ -7,13 +7,17 @@ pulled.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import secrets
 import threading
 import tty
 from pathlib import Path
 from typing import Self
 
 from servant_core.errors import ServantError
+
+PTY_FOLDER = "/dev/pts/"  # where Linux's pseudo-terminals are (what a stale link points to)
 
 
 class PtyPort:
@@ -24,19 +28,11 @@ class PtyPort:
         self.device = os.ttyname(self.slave)
         self.link: Path | None = None
         if link is not None:
-            path = Path(link)
-            tmp = path.with_name(f".{path.name}.tmp")
             try:
-                tmp.unlink(missing_ok=True)
-                tmp.symlink_to(self.device)
-                os.replace(tmp, path)
-            except OSError as exc:
+                self.link = _make_link(Path(link), self.device)
+            except BaseException:
                 self.close()
-                raise ServantError(
-                    f"{path}: cannot make it a link to the emulator's port ({exc.strerror}); "
-                    "give a path in a folder you can write to"
-                ) from exc
-            self.link = path
+                raise
 
     @property
     def port(self) -> str:
@@ -56,6 +52,38 @@ class PtyPort:
         ):
             self.link.unlink()
         self.link = None
+
+
+def _make_link(path: Path, device: str) -> Path:
+    """Make `path` a symlink to `device`, atomically. Only a stale link of an earlier run (to a
+    pseudo-terminal, or to nothing) may be replaced: any other file or link there is the
+    user's, and is left alone."""
+    if path.is_symlink():
+        stale = not path.exists() or os.readlink(path).startswith(PTY_FOLDER)
+        if not stale:
+            raise ServantError(
+                f"{path}: is a link to {os.readlink(path)}, not to a pseudo-terminal, so it is "
+                "not replaced; give a new name for the link, or remove it first"
+            )
+    elif path.exists():
+        raise ServantError(
+            f"{path}: exists and is not a link, so it is not replaced; "
+            "give a new name for the link, or remove the file first"
+        )
+    # a fresh, unguessable name beside the link: an existing file is never touched
+    tmp = path.with_name(f".{path.name}.{secrets.token_hex(8)}.tmp")
+    try:
+        tmp.symlink_to(device)
+        os.replace(tmp, path)
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            if tmp.is_symlink():
+                tmp.unlink()
+        raise ServantError(
+            f"{path}: cannot make it a link to the emulator's port ({exc.strerror}); "
+            "give a path in a folder you can write to"
+        ) from exc
+    return path
 
 
 class PtyService:

@@ -6,14 +6,13 @@ one is refused in one line naming it and is never overwritten. `save_settings()`
 
 from __future__ import annotations
 
-import json
-import math
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 from servant_core.errors import ServantError
-from servant_core.storage import atomic_write_json, config_dir
+from servant_core.numbers import is_finite_number, json_loads
+from servant_core.storage import atomic_write_json, config_dir, read_bounded_bytes
 
 FORMAT = "servant-settings"
 VERSION = 1
@@ -75,7 +74,7 @@ class Joint:
 
 def _is_number(value: object) -> bool:
     """A finite int or float; True and False are not numbers here (JSON's `true` is no angle)."""
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+    return is_finite_number(value)
 
 
 def _is_integer(value: object) -> bool:
@@ -170,15 +169,14 @@ def load_settings(path: str | Path | None = None) -> Settings:
     if not path.exists():
         return Settings()
     fix = "fix or delete it to get the defaults"
+    text = read_bounded_bytes(path, "settings file", MAX_FILE_BYTES)
     try:
-        if path.stat().st_size > MAX_FILE_BYTES:
-            raise ServantError(f"{path}: too big for a settings file; {fix}")
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = json_loads(text.decode("utf-8"))
     except RecursionError as exc:
         raise ServantError(
             f"{path}: not a readable settings file (nested too deeply); {fix}"
         ) from exc
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (UnicodeDecodeError, ValueError) as exc:
         raise ServantError(f"{path}: not a readable settings file ({exc}); {fix}") from exc
     if not isinstance(data, dict) or data.get("format", FORMAT) != FORMAT:
         raise ServantError(f"{path}: not a Servant settings file; {fix}")

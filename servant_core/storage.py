@@ -5,12 +5,18 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import stat
 import tempfile
+import time
+import zipfile
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 import platformdirs
+
+from servant_core.errors import ServantError
 
 APP_NAME = "servant"
 
@@ -36,11 +42,21 @@ def config_dir() -> Path:
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
-    """Write `data` to a temporary file beside `path`, then `os.replace` it into place."""
+    """Write `data` to a temporary file beside `path`, then `os.replace` it into place.
+
+    A file replaced keeps its permissions (a 0644 model stays 0644, not the temporary's 0600).
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(path)
+    try:
+        old_mode: int | None = stat.S_IMODE(os.stat(path).st_mode)
+    except OSError:
+        old_mode = None
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
+        if old_mode is not None:
+            os.fchmod(fd, old_mode)
         with os.fdopen(fd, "wb") as handle:
             handle.write(data)
             handle.flush()
@@ -51,6 +67,34 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
         raise
     _sync_directory(path.parent)
     return path
+
+
+# A write takes seconds at most; a temporary this old was left by a process killed mid-write.
+STALE_TEMPORARY_SECONDS = 3600.0
+
+
+def remove_stale_temporaries(path: Path, now: float | None = None) -> list[Path]:
+    """Remove the temporaries of earlier writes of `path` (`.NAME.XXXXXXXX.tmp`, as
+    `atomic_write_bytes` names them) that a killed process left, an hour old or more; a
+    temporary of a write going on now is younger and kept. Returns those removed."""
+    now = time.time() if now is None else now
+    prefix = f".{path.name}."
+    removed: list[Path] = []
+    try:
+        entries = list(os.scandir(path.parent))
+    except OSError:
+        return removed
+    for entry in entries:
+        name = entry.name
+        if not (name.startswith(prefix) and name.endswith(".tmp")):
+            continue
+        if len(name) != len(prefix) + 8 + len(".tmp"):  # mkstemp's 8 characters, no other file
+            continue
+        with contextlib.suppress(OSError):
+            if now - entry.stat(follow_symlinks=False).st_mtime >= STALE_TEMPORARY_SECONDS:
+                os.unlink(entry.path)
+                removed.append(Path(entry.path))
+    return removed
 
 
 def _sync_directory(folder: Path) -> None:
@@ -84,3 +128,148 @@ def atomic_save_npz(path: str | os.PathLike[str], arrays: dict[str, np.ndarray])
     buffer = io.BytesIO()
     np.savez(buffer, **arrays)  # type: ignore[arg-type]  # numpy's stub types **kwds oddly
     return atomic_write_bytes(path, buffer.getvalue())
+
+
+# Linux and macOS allow 255 bytes a name; the temporary file `.NAME.XXXXXXXX.tmp` adds 14.
+MAX_NAME_BYTES = 255 - 14
+
+
+def check_replaceable(
+    path: str | os.PathLike[str], what: str, is_kind: Callable[[Path], bool]
+) -> None:
+    """Refuse to write `what` at `path` when that would destroy something else: a symbolic link
+    (replacing it loses the link, following it writes where the user did not say), an
+    existing file that `is_kind` does not recognise as a `what` (a recording, a document), or
+    a name a scene library would read as a recording, picture or sensor log."""
+    from servant_core.senses import sense_of_file  # senses needs audio, which needs storage
+
+    path = Path(path)
+    if len(os.fsencode(path.name)) > MAX_NAME_BYTES:
+        raise ServantError(
+            f"{str(path)[:60]}...: a file name of {len(os.fsencode(path.name))} bytes is longer "
+            f"than {MAX_NAME_BYTES}; choose a shorter name"
+        )
+    sense = sense_of_file(path.name)
+    if sense is not None:
+        raise ServantError(
+            f"{path}: a scene library reads a file of this name as {sense.name} data; "
+            f"give the {what} a name ending in .npz"
+        )
+    try:
+        if path.is_symlink():
+            raise ServantError(
+                f"{path}: is a symbolic link; give the file's own path "
+                f"({os.path.realpath(path)}) or another name"
+            )
+        exists = path.exists() and not path.is_dir()
+    except OSError as exc:  # e.g. a folder on the way that cannot be searched
+        raise ServantError(f"{path}: cannot write the {what} there ({os_reason(exc)})") from None
+    if exists and not is_kind(path):
+        raise ServantError(
+            f"{path}: exists and is not {_article(what)}, so it is not overwritten; "
+            "move it away or choose another name"
+        )
+
+
+def is_servant_npz(path: Path) -> bool:
+    """A regular `.npz` that Servant wrote: a zip archive with a `header.npy` member."""
+    try:
+        with open_regular_file(path, "file") as handle, zipfile.ZipFile(handle) as archive:
+            return "header.npy" in archive.namelist()
+    except (ServantError, OSError, zipfile.BadZipFile, ValueError, EOFError):
+        return False
+
+
+def open_regular_file(path: str | os.PathLike[str], what: str) -> BinaryIO:
+    """Open a file for reading in Python (any file name works, even one that is not UTF-8);
+    a missing file, a folder, a FIFO or a device is refused without blocking on it.
+
+    The file is opened without blocking and checked on the open descriptor, so a FIFO put in
+    its place between a check and the open cannot hang the program either.
+    """
+    path = Path(path)
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0))
+    except FileNotFoundError:
+        raise ServantError(f"{path}: no such file; check the path") from None
+    except OSError as exc:
+        raise ServantError(f"{path}: cannot open the {what} ({os_reason(exc)})") from None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise ServantError(f"{path}: not a regular file; give {_article(what)}")
+        os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def read_bounded_bytes(path: str | os.PathLike[str], what: str, max_bytes: int) -> bytes:
+    """The whole of a regular file of at most `max_bytes`; anything else one ServantError.
+    The size is checked before reading, and the read stops one byte past the bound (a file
+    growing meanwhile, or a /proc file that claims 0 bytes)."""
+    path = Path(path)
+    with open_regular_file(path, what) as handle:
+        try:
+            if os.fstat(handle.fileno()).st_size > max_bytes:
+                raise _too_big(path, what, max_bytes)
+            data = handle.read(max_bytes + 1)
+        except OSError as exc:
+            raise ServantError(f"{path}: cannot read the {what} ({os_reason(exc)})") from None
+    if len(data) > max_bytes:
+        raise _too_big(path, what, max_bytes)
+    return data
+
+
+def _too_big(path: Path, what: str, max_bytes: int) -> ServantError:
+    return ServantError(
+        f"{path}: larger than any {what} ({max_bytes / 2**20:g} MiB at most); "
+        "check that it is the right file"
+    )
+
+
+def _article(what: str) -> str:
+    return f"an {what}" if what[:1] in "aeiou" else f"a {what}"
+
+
+def os_reason(exc: OSError) -> str:
+    """The operating system's short reason ("Permission denied"), not the whole repr."""
+    return exc.strerror or type(exc).__name__
+
+
+# A scene library keeps its files a few folders below each scene; hundreds of levels are a
+# mistake or an attack (1,100 levels once exhausted Python's recursion in `Path.rglob`).
+MAX_FOLDER_DEPTH = 64
+
+
+def walk_files(folder: str | os.PathLike[str], max_depth: int = MAX_FOLDER_DEPTH) -> list[Path]:
+    """Every file below `folder` (following links to folders, each folder visited once: a link
+    back up is no loop), sorted; without recursion, so depth costs no stack. A folder deeper
+    than `max_depth` is one ServantError; an OSError reading a folder propagates."""
+    root = Path(folder)
+    files: list[Path] = []
+    seen: set[tuple[int, int]] = set()
+    pending: list[tuple[Path, int]] = [(root, 0)]
+    while pending:
+        current, depth = pending.pop()
+        info = os.stat(current)
+        if (info.st_dev, info.st_ino) in seen:
+            continue
+        seen.add((info.st_dev, info.st_ino))
+        with os.scandir(current) as entries:
+            for entry in entries:
+                path = current / entry.name
+                try:
+                    is_dir = entry.is_dir()
+                except OSError:
+                    continue  # e.g. a link to a folder that cannot be read: not a file either
+                if not is_dir:
+                    files.append(path)
+                elif depth + 1 > max_depth:
+                    raise ServantError(
+                        f"{root}: folders nested more than {max_depth} levels deep "
+                        f"({str(path)[:80]}...); move the files nearer the top"
+                    )
+                else:
+                    pending.append((path, depth + 1))
+    return sorted(files)

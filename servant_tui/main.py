@@ -3,33 +3,34 @@
 `servant` alone (or `servant run`) opens the TUI on the live devices; `servant demo` opens it on
 the demo scenes. With `--headless` (or `demo --fast`) they print lines instead, as servant_core's
 other subcommands do.
+
+Ctrl-C is quiet at any time, even in the first second, while the engine's libraries are still
+being imported: this module imports them only inside `main`, under the same guard.
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
-from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from servant_core.cli import build_parser as build_core_parser
-from servant_core.cli import run_handler
-from servant_core.cli.live import build_run_engine
-from servant_core.demo.space import throwaway_space
-from servant_core.engine import build_demo_engine
-from servant_core.errors import ServantError
-from servant_core.progress import Progress
-from servant_tui.heap import limit_heaps, release_free_heap
-from servant_tui.memtrace import start_from_environment as start_memtrace
+if TYPE_CHECKING:
+    import argparse
+    from collections.abc import Callable, Sequence
+
+INTERRUPTED = 130  # the shell's status for a command ended by SIGINT
 
 
 def build_parser() -> argparse.ArgumentParser:
     """servant_core's parser: its `demo` and `run` open the TUI here unless `--headless`."""
+    from servant_core.cli import build_parser as build_core_parser
+
     return build_core_parser()
 
 
 def run_tui(engine_factory: Callable[[], Any], mode: str) -> int:
+    from servant_core.errors import ServantError
     from servant_tui.app import ServantApp
+    from servant_tui.heap import release_free_heap
 
     try:
         engine = engine_factory()
@@ -43,6 +44,37 @@ def run_tui(engine_factory: Callable[[], Any], mode: str) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:  # before a command's own handling of it (importing, parsing)
+        return INTERRUPTED
+    except ImportError as error:  # Ctrl-C in an extension module's initialisation reads so
+        if _interrupted(error):
+            return INTERRUPTED
+        raise
+
+
+def _interrupted(error: BaseException) -> bool:
+    """Whether `error` was caused by Ctrl-C (a KeyboardInterrupt in its chain)."""
+    seen: set[int] = set()
+    cause: BaseException | None = error
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return True
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return False
+
+
+def _main(argv: Sequence[str] | None) -> int:
+    from servant_core.cli import run_handler
+    from servant_core.cli.live import build_run_engine
+    from servant_core.demo.space import throwaway_space
+    from servant_core.engine import build_demo_engine
+    from servant_core.progress import Progress
+    from servant_tui.heap import limit_heaps
+    from servant_tui.memtrace import start_from_environment as start_memtrace
+
     args = build_parser().parse_args(argv)
     limit_heaps()  # before the engine's and Textual's threads start
     start_memtrace()  # a developer option, off unless SERVANT_MEMTRACE is set

@@ -35,6 +35,7 @@ from tests.cli_harness import (
     zip_bomb,
 )
 from tests.conftest import tone
+from tests.test_fuzz_settings import beyond_floats
 
 SCALE = float(os.environ.get("SERVANT_FUZZ_SCALE", "1"))
 
@@ -262,6 +263,7 @@ json_values = st.recursive(
     st.none()
     | st.booleans()
     | st.integers(-(2**70), 2**70)
+    | beyond_floats
     | st.floats(allow_nan=True, allow_infinity=True)
     | st.text(max_size=8)
     | st.sampled_from(["paper", "audio", "image", "servant-model", "<unknown>", "cafe"]),

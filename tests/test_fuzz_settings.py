@@ -30,10 +30,16 @@ FUZZ = settings(
 )
 SECONDS = 2.0  # any one file, read or refused
 
+# Integers a float cannot hold (issue 24 item 3): 400 digits once crashed every reader with
+# `OverflowError: int too large to convert to float`.
+beyond_floats = st.builds(
+    lambda digits, sign: sign * 10**digits, st.integers(309, 1000), st.sampled_from([1, -1])
+)
 leaves = st.one_of(
     st.none(),
     st.booleans(),
     st.integers(min_value=-(2**70), max_value=2**70),
+    beyond_floats,
     st.floats(),  # NaN and Infinity too: Python's json writes and reads them
     st.text(max_size=20),
 )
@@ -194,3 +200,37 @@ def test_any_teach_record_file_is_read_or_refused_in_one_line(tmp_path, content)
         assert load_records(path) == after
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
     assert time.monotonic() - started < SECONDS
+
+
+def number_paths(node: Any, prefix: tuple = ()) -> list[tuple]:
+    """The place of every number in a JSON document."""
+    if isinstance(node, dict):
+        return [p for key, value in node.items() for p in number_paths(value, (*prefix, key))]
+    if isinstance(node, list):
+        return [p for i, value in enumerate(node) for p in number_paths(value, (*prefix, i))]
+    return [prefix] if isinstance(node, int | float) and not isinstance(node, bool) else []
+
+
+def with_number(document: Any, path: tuple, value: int) -> bytes:
+    document = json.loads(json.dumps(document))
+    node = document
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = value
+    return json.dumps(document).encode()
+
+
+@FUZZ
+@given(pick=st.integers(0, 10**6), value=beyond_floats, records=st.booleans())
+def test_any_number_beyond_floats_is_refused_in_one_line(tmp_path, pick, value, records):
+    """Issue 24 item 3: each number of a settings or teach record file replaced by an integer
+    of 309 to 1000 digits; the file is refused in one line (never an OverflowError)."""
+    document = valid_records() if records else Settings().to_json()
+    paths = number_paths(document)
+    content = with_number(document, paths[pick % len(paths)], value)
+    path = tmp_path / "file.json"
+    path.write_bytes(content)
+    with pytest.raises(ServantError) as refused:
+        load_records(path) if records else load_settings(path)
+    one_clear_line(refused.value, path)
+    assert "too large" in str(refused.value)

@@ -78,8 +78,11 @@ def test_bad_answers_are_asked_again_never_crash(monkeypatch, capsys):
 
 
 def test_nothing_taught_is_said(monkeypatch, capsys):
-    status, out, _ = run(["teach"], "\n", monkeypatch, capsys)
-    assert status == 1 and "Nothing to learn from" in out
+    """One error line and status 2, as for every other error (issue 24 item 8: it was a line on
+    stdout and status 1)."""
+    status, _, err = run(["teach"], "\n", monkeypatch, capsys)
+    assert status == 2 and err.startswith("servant: error: nothing to learn from")
+    assert err.count("\n") == 1
 
 
 def test_teach_with_a_port_moves_the_emulated_arm(monkeypatch, capsys):

@@ -28,10 +28,16 @@ from sklearn.neural_network import MLPRegressor
 from threadpoolctl import threadpool_limits
 
 from servant_core.actions.records import SENSES, TeachRecord, label_scores
-from servant_core.audio import os_reason
 from servant_core.errors import ServantError
+from servant_core.numbers import json_loads
 from servant_core.recognisers.base import UNKNOWN
-from servant_core.storage import atomic_save_npz, data_dir
+from servant_core.storage import (
+    atomic_save_npz,
+    check_replaceable,
+    data_dir,
+    is_servant_npz,
+    os_reason,
+)
 
 FORMAT = "servant-action-learner"
 VERSION = 1
@@ -251,6 +257,7 @@ class ActionLearner:
             "history": self.history_,
             "n_records": self.n_records_,
         }
+        check_replaceable(path, "action learner file", is_servant_npz)
         arrays = {f"coef_{i}": w for i, w in enumerate(self.coefs_)}
         arrays |= {f"intercept_{i}": b for i, b in enumerate(self.intercepts_)}
         arrays |= {
@@ -276,7 +283,7 @@ class ActionLearner:
         try:
             with np.load(path, allow_pickle=False) as npz:
                 arrays = {name: npz[name] for name in npz.files}
-            header = json.loads(str(arrays.pop("header")))
+            header = json_loads(str(arrays.pop("header")))
             fmt, version = header["format"], header["version"]
         except (
             OSError,

@@ -11,21 +11,31 @@ It becomes a pose for one joint (`legacy_joint`) and certain scores for its scen
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from servant_core.audio import os_reason
 from servant_core.errors import ServantError
-from servant_core.storage import atomic_write_bytes, atomic_write_text, data_dir
+from servant_core.numbers import is_finite_number, json_loads
+from servant_core.storage import (
+    atomic_write_bytes,
+    atomic_write_text,
+    data_dir,
+    os_reason,
+    read_bounded_bytes,
+)
 
 FORMAT = "servant-teach-records"
 VERSION = 2
 SENSES = ("acoustic", "visual")
 SOURCES = ("typed", "recorded", "perceived")
 MAX_FILE_BYTES = 64 << 20  # some 300,000 records: far more than anyone teaches
+# The action learner reads two scores a scene for each record: 20,000 scenes once asked for
+# 3.5 GB. A wearer teaches dozens of places and some hundreds of records; these bound the
+# learner's table to some 160 MB.
+MAX_SCENES = 500
+MAX_RECORDS = 20_000
 
 
 @dataclass(frozen=True)
@@ -60,13 +70,11 @@ def default_records_path() -> Path:
 def _finite_map(value: Any, what: str) -> dict[str, float]:
     if not isinstance(value, Mapping) or not value:
         raise ValueError(f"{what} must be a non-empty object of numbers")
+    if len(value) > MAX_SCENES:
+        raise ValueError(f"{what} has more than {MAX_SCENES} entries")
     out = {}
     for key, number in value.items():
-        if (
-            isinstance(number, bool)
-            or not isinstance(number, int | float)
-            or not math.isfinite(number)
-        ):
+        if not is_finite_number(number):
             raise ValueError(f"{what}[{key!r}] is not a finite number")
         out[str(key)] = float(number)
     return out
@@ -85,7 +93,7 @@ def _record(raw: Any) -> TeachRecord:
     if source not in SOURCES:
         raise ValueError(f"source {source!r} is unknown")
     t = raw.get("t", 0.0)
-    if isinstance(t, bool) or not isinstance(t, int | float) or not math.isfinite(t):
+    if not is_finite_number(t):
         raise ValueError("t is not a time")
     notes = raw.get("notes", [])
     if not isinstance(notes, list) or not all(isinstance(n, str) for n in notes):
@@ -116,15 +124,14 @@ def _migrate_v1(raw_records: Sequence[Any], legacy_joint: str) -> list[dict[str,
 
 def _read(path: Path, legacy_joint: str) -> tuple[int, list[TeachRecord]]:
     fix = "fix or move the file away (Servant never overwrites it)"
+    text = read_bounded_bytes(path, "teach record file", MAX_FILE_BYTES)
     try:
-        if path.stat().st_size > MAX_FILE_BYTES:
-            raise ServantError(f"{path}: too big for a teach record file; {fix}")
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = json_loads(text.decode("utf-8"))
     except RecursionError as exc:
         raise ServantError(
             f"{path}: not a readable teach record file (nested too deeply); {fix}"
         ) from exc
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (UnicodeDecodeError, ValueError) as exc:
         raise ServantError(f"{path}: not a readable teach record file ({exc}); {fix}") from exc
     if not isinstance(data, Mapping) or data.get("format") != FORMAT:
         raise ServantError(f"{path}: not a Servant teach record file; {fix}")
@@ -140,13 +147,28 @@ def _read(path: Path, legacy_joint: str) -> tuple[int, list[TeachRecord]]:
         raise ServantError(f"{path}: no list of records; {fix}")
     if version == 1:
         raw_records = _migrate_v1(raw_records, legacy_joint)
+    if len(raw_records) > MAX_RECORDS:
+        raise ServantError(f"{path}: more than {MAX_RECORDS:,} records; {fix}")
     records = []
     for i, raw in enumerate(raw_records):
         try:
             records.append(_record(raw))
         except ValueError as exc:
             raise ServantError(f"{path}: record {i + 1}: {exc}; {fix}") from exc
+    _check_bounds(path, records, fix)
     return version, records
+
+
+def _check_bounds(path: Path, records: Sequence[TeachRecord], fix: str) -> None:
+    """At most `MAX_RECORDS` records over at most `MAX_SCENES` scenes (labels and scored)."""
+    if len(records) > MAX_RECORDS:
+        raise ServantError(f"{path}: more than {MAX_RECORDS:,} records; {fix}")
+    scenes = {r.scene for r in records}
+    for record in records:
+        for scores in record.scores.values():
+            scenes.update(scores)
+        if len(scenes) > MAX_SCENES:
+            raise ServantError(f"{path}: records name more than {MAX_SCENES} scenes; {fix}")
 
 
 def load_records(
@@ -200,5 +222,6 @@ def append_record(
                     "was changed; check that the folder can be written to and has space"
                 ) from None
     records.append(record)
+    _check_bounds(path, records, "nothing was added; start another record file")
     save_records(records, path)
     return records

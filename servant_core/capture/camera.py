@@ -7,6 +7,9 @@ at its end it starts again from the first frame, as a camera never runs out.
 
 from __future__ import annotations
 
+import os
+import stat
+
 import cv2
 import numpy as np
 
@@ -24,6 +27,29 @@ def parse_camera(spec: int | str) -> int | str:
     return spec
 
 
+# V4L2 allows 64 devices a driver; OpenCV takes the index as a C int (and fails on more).
+MAX_CAMERA_INDEX = 1023
+V4L2_MAJOR = 81  # Linux's video4linux devices (/dev/video*)
+
+
+def _check_video_path(source: str) -> None:
+    """A video file must be a regular file (a FIFO would block OpenCV forever, ignoring any
+    time limit, and a device like /dev/zero reads without end); a camera device path must be
+    a video device. A path that does not exist may be an image pattern (img_%03d.png)."""
+    try:
+        info = os.stat(source)
+    except (OSError, ValueError):
+        return
+    if stat.S_ISREG(info.st_mode):
+        return
+    if stat.S_ISCHR(info.st_mode) and os.major(info.st_rdev) == V4L2_MAJOR:
+        return
+    raise ServantError(
+        f"video {source}: not a video file nor a camera device; give a video file, an image "
+        "pattern or a camera index (Settings, or --camera)"
+    )
+
+
 class Camera:
     def __init__(self, source: int | str = 0) -> None:
         self.source = parse_camera(source)
@@ -37,6 +63,12 @@ class Camera:
 
     def open(self) -> None:
         self.close()
+        if isinstance(self.source, int) and not 0 <= self.source <= MAX_CAMERA_INDEX:
+            raise ServantError(
+                f"{self.name}: no such camera; a camera index is 0 to {MAX_CAMERA_INDEX}"
+            )
+        if isinstance(self.source, str):
+            _check_video_path(self.source)
         capture = cv2.VideoCapture(self.source)
         if not capture.isOpened():
             capture.release()

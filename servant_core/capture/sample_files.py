@@ -25,23 +25,29 @@ import io
 import math
 import re
 import time
+from array import array
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from servant_core.audio import DEFAULT_WINDOW_SECONDS, open_regular_file, os_reason
+from servant_core.audio import DEFAULT_WINDOW_SECONDS
 from servant_core.capture.replay import Clip, PacedAudio
-from servant_core.capture.sensors import CHANNELS, RATES
+from servant_core.capture.sensors import CHANNELS, RATES, rows_in_range
 from servant_core.capture.source import ManualClock
 from servant_core.errors import ServantError
+from servant_core.numbers import MAX_STAMP
 from servant_core.senses import SAMPLE_SENSES
-from servant_core.storage import atomic_write_text
+from servant_core.storage import atomic_write_text, open_regular_file, os_reason
 
 SUFFIXES = {s.stream: s.suffixes[0] for s in SAMPLE_SENSES.values() if s.stream}
 MAX_GAP_S = 1.0  # longer pauses in a log are not interpolated across
-MAX_FILE_BYTES = 512 * 1024 * 1024  # a day of 100 Hz motion is ~500 MB: more is not a log
+# Four hours of 100 Hz motion is some 1.5 million rows, 80 MB of text; a file, its rows and
+# its resampled readings stay within a few hundred megabytes of memory below these bounds.
+MAX_FILE_BYTES = 128 * 1024 * 1024
+MAX_ROWS = 2_000_000
+MAX_LOG_SECONDS = 4 * 3600.0  # of readings, once resampled: pauses under MAX_GAP_S count
 G = 9.80665
 
 ALIASES: dict[str, tuple[str, ...]] = {
@@ -80,6 +86,7 @@ class SampleLog:
     times: np.ndarray
     values: np.ndarray
     skipped: int
+    path: Path | None = None
 
 
 def read_sample_csv(path: str | Path, kind: str) -> SampleLog:
@@ -96,7 +103,9 @@ def read_sample_csv(path: str | Path, kind: str) -> SampleLog:
             if header is None:
                 raise ServantError(f"{path}: empty; a {kind} CSV starts with a header row")
             columns, factors, time_unit = _columns(path, header, channels)
-            times, values, skipped = [], [], 0
+            times: list[int | float] = []
+            values = array("d")  # flat: a Python list of lists takes ten times the memory
+            skipped = 0
             for row in rows:
                 try:
                     stamp = _stamp(row[columns[0]])
@@ -107,8 +116,12 @@ def read_sample_csv(path: str | Path, kind: str) -> SampleLog:
                 if not all(math.isfinite(v) for v in (stamp, *numbers)):
                     skipped += 1
                     continue
+                if len(times) >= MAX_ROWS:
+                    raise ServantError(
+                        f"{path}: more than {MAX_ROWS:,} readings; split it into shorter logs"
+                    )
                 times.append(stamp)
-                values.append(numbers)
+                values.extend(numbers)
         except OSError as exc:
             raise ServantError(f"{path}: cannot read the file ({os_reason(exc)})") from None
         except csv.Error as exc:
@@ -120,17 +133,29 @@ def read_sample_csv(path: str | Path, kind: str) -> SampleLog:
     # integers but lose a quarter of a microsecond as floats
     t = np.asarray([stamp - first for stamp in times], dtype=np.float64)
     order = np.argsort(t, kind="stable")
-    t = t[order]
-    v = np.asarray(values, dtype=np.float64)[order] * np.asarray(factors)
-    return SampleLog(_seconds(t, time_unit), v.astype(np.float32), skipped)
+    v = np.frombuffer(values, dtype=np.float64).reshape(len(times), -1)[order] * np.asarray(factors)
+    # in range in the format's units, after the unit's conversion, before the cast to float32
+    usable = rows_in_range(v, kind)
+    if np.count_nonzero(usable) < 2:
+        raise ServantError(
+            f"{path}: fewer than two readings within what a {kind} sensor reads; "
+            "check the columns' units"
+        )
+    t, v = t[order][usable], v[usable]
+    skipped += len(usable) - int(np.count_nonzero(usable))
+    return SampleLog(_seconds(t, time_unit), v.astype(np.float32), skipped, path)
 
 
 def _stamp(text: str) -> int | float:
-    """A time stamp: an integer kept exact, else a float."""
+    """A time stamp: an integer kept exact, else a float; ValueError beyond 64 bits (no unit
+    of a logger's clock needs more, and the differences of larger ones overflow floats)."""
     try:
-        return int(text)
+        stamp: int | float = int(text)
     except ValueError:
-        return float(text)
+        stamp = float(text)
+    if not -MAX_STAMP < stamp < MAX_STAMP:
+        raise ValueError(f"time stamp {text[:20]} out of range")
+    return stamp
 
 
 def _columns(
@@ -175,6 +200,14 @@ def resampled(log: SampleLog, rate: int) -> list[np.ndarray]:
     keep = np.concatenate([[True], np.diff(t) > 0])  # duplicate stamps: the first reading
     t, v = t[keep], v[keep]
     cuts = np.flatnonzero(np.diff(t) > MAX_GAP_S) + 1
+    # the grid's length is known before any of it is made: rows 0.99 s apart are 99 samples
+    # each at 100 Hz, and a few megabytes of them would otherwise be gigabytes
+    starts, ends = t[np.r_[0, cuts]], t[np.r_[cuts - 1, len(t) - 1]]
+    if np.sum(ends - starts) > MAX_LOG_SECONDS:
+        raise ServantError(
+            f"{log.path or 'a sensor log'}: its readings span more than "
+            f"{MAX_LOG_SECONDS / 3600:g} hours; split it into shorter logs"
+        )
     pieces = []
     for times, values in zip(np.split(t, cuts), np.split(v, cuts), strict=True):
         # the last reading stands for one period after it: 10 readings at 2 Hz are 5 s

@@ -13,6 +13,7 @@ from servant_core.capture.sample_files import SUFFIXES, PacedSamples, replay_sam
 from servant_core.capture.sensors import SensorBoard, SerialSamples
 from servant_core.capture.source import ManualClock
 from servant_core.errors import ServantError
+from servant_core.storage import walk_files
 
 
 def is_log(spec: str) -> bool:
@@ -46,7 +47,7 @@ def sensor_sources(
         path = Path(spec)
         items: list[tuple[str | None, Path]]
         if path.is_dir():
-            files = sorted(path.rglob(f"*{SUFFIXES[kind]}"))
+            files = [f for f in walk_files(path) if f.name.endswith(SUFFIXES[kind])]
             if not files:
                 raise ServantError(f"{path}: no {SUFFIXES[kind]} files in it; record some first")
             items = [(f.parent.name, f) for f in files]

@@ -19,7 +19,6 @@ two `SampleSource`s over it, which may be read from different threads.
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from collections import deque
@@ -29,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from servant_core.errors import ServantError
+from servant_core.numbers import MAX_STAMP
 from servant_core.servo.link import PORT_ERRORS, open_serial
 
 IMU_CHANNELS = ("ax", "ay", "az", "gx", "gy", "gz")
@@ -39,7 +39,34 @@ STREAMS: dict[str, tuple[str, tuple[str, ...]]] = {
     "A": ("ambient", AMBIENT_CHANNELS),
 }
 TAGS = {kind: tag for tag, (kind, _) in STREAMS.items()}
+# What each channel can read, in the format's units, with room to spare: a phone's or an
+# MPU-6050's accelerometer spans ±16 g (157 m/s²) and its gyroscope ±2000 deg/s; sunlight is
+# some 120,000 lux; barometers read 300–1100 hPa. A value beyond is line noise or a damaged
+# log, and would overflow the features' squares and sums (1e307 lux, 3.4e38 m/s²).
+ACCELERATION_LIMIT = (-2000.0, 2000.0)
+ROTATION_LIMIT = (-20000.0, 20000.0)
+CHANNEL_LIMITS: dict[str, tuple[float, float]] = {
+    "ax": ACCELERATION_LIMIT,
+    "ay": ACCELERATION_LIMIT,
+    "az": ACCELERATION_LIMIT,
+    "gx": ROTATION_LIMIT,
+    "gy": ROTATION_LIMIT,
+    "gz": ROTATION_LIMIT,
+    "lux": (0.0, 1e6),
+    "celsius": (-100.0, 200.0),
+    "hpa": (0.0, 2000.0),
+}
 CHANNELS = {kind: channels for kind, channels in STREAMS.values()}
+
+
+def rows_in_range(values: np.ndarray, kind: str) -> np.ndarray:
+    """Which rows of (n, channels) readings of stream `kind` are numbers each within its
+    channel's `CHANNEL_LIMITS` (NaN and infinity are not)."""
+    low, high = np.array([CHANNEL_LIMITS[c] for c in CHANNELS[kind]]).T
+    values = np.asarray(values, dtype=np.float64)
+    return np.all((values >= low) & (values <= high), axis=1)
+
+
 IMU_RATE = 50  # Hz: above twice the 20 Hz top of the vibration band the features look at
 AMBIENT_RATE = 2  # Hz: light, temperature and pressure change slowly
 RATES = {"imu": IMU_RATE, "ambient": AMBIENT_RATE}
@@ -69,8 +96,10 @@ def parse_line(line: bytes) -> SensorLine | None:
         raise ValueError(f"{len(fields)} fields, not {2 + len(channels)}")
     millis = int(fields[1])
     values = tuple(float(f) for f in fields[2:])
-    if millis < 0 or not all(math.isfinite(v) for v in values):
-        raise ValueError("a negative time or a value that is not finite")
+    if not 0 <= millis < MAX_STAMP:
+        raise ValueError("a time stamp out of range")
+    if not rows_in_range(np.array([values]), kind)[0]:
+        raise ValueError("a value beyond what the sensor reads")
     return SensorLine(kind, millis, values)
 
 

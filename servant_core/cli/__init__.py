@@ -87,12 +87,20 @@ def emit(args: argparse.Namespace, payload: Any, text: str) -> None:
     if getattr(args, "json", False):
         print(json.dumps(payload, indent=2, default=_json_default))
     else:
-        print(printable(text, sys.stdout))
+        print(printable(terminal_text(text), sys.stdout))
 
 
-def one_line(text: str) -> str:
-    """`text` with control characters (a file name may hold a newline) shown as escapes."""
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+def one_line(text: str, keep: str = "") -> str:
+    """`text` with control characters (a file name may hold a newline) shown as escapes, but
+    for those in `keep`."""
+    return "".join(c if c.isprintable() or c in keep else repr(c)[1:-1] for c in text)
+
+
+def terminal_text(text: str) -> str:
+    """Lines for the terminal: every control character but newline and tab shown as an escape,
+    so that a name from a file (a scene folder, a model header's scene) cannot retitle, clear
+    or otherwise command the user's terminal (ESC ] 0 ; title BEL, ESC [ 2 J)."""
+    return one_line(text, keep="\n\t")
 
 
 def printable(text: str, stream: Any) -> str:

@@ -19,7 +19,7 @@ from servant_core.actions.records import (
     label_scores,
     load_records,
 )
-from servant_core.cli import emit, serve_until_stopped
+from servant_core.cli import emit, serve_until_stopped, terminal_text
 from servant_core.cli.options import bounded_int, finite_float
 from servant_core.errors import ServantError
 from servant_core.servo import PROTOCOLS
@@ -192,7 +192,7 @@ def run_move(args: argparse.Namespace) -> int:
         link.arm()
         reached = link.move_to(pose)
         for note in link.notes:
-            print(note, file=out)
+            print(terminal_text(note), file=out)
         emit(
             args,
             {
@@ -240,7 +240,7 @@ class Session:
         self.echo = not (hasattr(inp, "isatty") and inp.isatty())
 
     def say(self, line: str) -> None:
-        print(line, file=self.out, flush=True)
+        print(terminal_text(line), file=self.out, flush=True)
 
     def ask(self, prompt: str) -> str | None:
         """The answer, stripped; None at the end of input."""
@@ -252,7 +252,7 @@ class Session:
                 self.out.write("\n")
             return None
         if self.echo:
-            self.out.write(line if line.endswith("\n") else line + "\n")
+            self.out.write(terminal_text(line if line.endswith("\n") else line + "\n"))
         return line.strip()
 
 
@@ -274,10 +274,7 @@ def run_teach(
         if args.predict_only:
             learner = ActionLearner.load(learner_path)
         else:
-            trained = _train(args, settings, session, joint, records_path, link)
-            if trained is None:
-                return 1
-            learner = trained
+            learner = _train(args, settings, session, joint, records_path, link)
             learner.save(learner_path)
         _predict(learner, session, link)
     finally:
@@ -293,7 +290,7 @@ def _train(
     joint: str,
     records_path: str | Path,
     link: ServoLink | None,
-) -> ActionLearner | None:
+) -> ActionLearner:
     joints = {j.name: j for j in settings.joints}
     records = load_records(records_path, legacy_joint=joint)
     if records:
@@ -314,9 +311,11 @@ def _train(
         records = append_record(record, records_path, legacy_joint=joint)
         if link is not None and link.armed:
             _act(link, pose, session.say)
-    if not records:
-        session.say("Nothing to learn from: teach at least one scene.")
-        return None
+    if not records:  # the input ended (or an empty label came) before any scene was taught
+        raise ServantError(
+            "nothing to learn from: teach at least one scene (a label, then its action), "
+            "or ask a learner taught before with --predict-only"
+        )
     session.say(f"Learning from {len(records)} teach records...")
     learner = ActionLearner(
         max_iter=args.iterations,

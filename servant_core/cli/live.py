@@ -16,6 +16,7 @@ import sys
 import time
 from typing import Any
 
+from servant_core.cli import terminal_text
 from servant_core.cli.options import finite_float, sample_rate
 from servant_core.engine import Engine, LiveSettings, build_demo_engine, build_live_engine
 from servant_core.errors import ServantError
@@ -250,7 +251,7 @@ def _printer(as_json: bool) -> Any:
     def show(event: Event) -> None:
         text = _event_json(event) if as_json else _event_line(event)
         if text is not None:
-            print(text, flush=True)
+            print(terminal_text(text), flush=True)
 
     return show
 

@@ -9,6 +9,8 @@ from collections import Counter
 from pathlib import Path
 from typing import Any, cast
 
+import numpy as np
+
 from servant_core.audio import DEFAULT_RATE, DEFAULT_WINDOW_SECONDS, cut_windows, read_audio
 from servant_core.cli import emit, one_line, options
 from servant_core.engine import FRESH_METHODS, decision_unit
@@ -31,10 +33,11 @@ from servant_core.evaluate import (
     said_of,
 )
 from servant_core.event_text import confidence_text, place
+from servant_core.features.rows import checked_rows, usable_rows
 from servant_core.fusion import POLICIES, FusionConfig, LearnedFusion
 from servant_core.fusion.elsewhere import place_probability
 from servant_core.library import SceneLibrary, featurize_recordings, read_picture, read_pictures
-from servant_core.modelfile import load_model_and_fusion, save_model
+from servant_core.modelfile import check_model_output, load_model_and_fusion, save_model
 from servant_core.progress import Progress
 from servant_core.recognisers import (
     ACOUSTIC_METHODS,
@@ -284,10 +287,8 @@ def _audio_params(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    if args.output is not None and args.output.is_dir():
-        raise ServantError(
-            f"{args.output}: is a folder; give a model file name such as {args.output}/model.npz"
-        )
+    if args.output is not None:
+        check_model_output(args.output)  # before the work, not after it
     library = SceneLibrary.scan(args.root)
     on_error = _warn if args.skip_bad else None
     recognisers: dict[str, Recogniser] = {}
@@ -328,14 +329,21 @@ def cmd_train(args: argparse.Namespace) -> int:
         if len({f.scene for f in files}) < 2:
             continue
         stream = SAMPLE_SENSES[sense].stream
-        model = refit_samples(
-            files,
-            stream or sense,
-            make_recogniser(sense, FRESH_METHODS[sense]),
-            args.window,
-            on_error or _raise,
-            Progress(f"reading {sense} logs"),
-        )
+        try:
+            model = refit_samples(
+                files,
+                stream or sense,
+                make_recogniser(sense, FRESH_METHODS[sense]),
+                args.window,
+                on_error or _raise,
+                Progress(f"reading {sense} logs"),
+            )
+        except ServantError as error:
+            if on_error is None:
+                raise
+            # e.g. the bad log was a scene's only one: this sense is left out, the others train
+            on_error(ServantError(f"{sense}: not trained: {error}"))
+            model = None
         if model is not None:
             recognisers[sense] = model
             summary[sense] = {"method": model.method, "scenes": model.scenes_}
@@ -400,16 +408,28 @@ def cmd_predict(args: argparse.Namespace) -> int:
                 f"{args.audio}: shorter than one {seconds:g} s window; record longer"
             )
         X = audio.featurize(windows)
+        usable = usable_rows(X)
+        if not np.any(usable):
+            raise ServantError(
+                f"{args.audio}: no window gives features that are finite numbers; "
+                "the file is damaged, record it again"
+            )
+        if not np.all(usable):
+            _warn(
+                ServantError(
+                    f"{args.audio}: windows {', '.join(map(str, np.flatnonzero(~usable)))}: "
+                    "features not finite numbers"
+                )
+            )
+        X = X[usable]
         scenes, confidences = open_predict(audio, X), audio.confidence(X)
         unit = audio.confidence_unit
+        judged = list(zip(np.flatnonzero(usable).tolist(), scenes, confidences, strict=True))
         result["acoustic"] = [
             {"window": i, "scene": str(s), "confidence": float(c), "confidence_unit": unit}
-            for i, (s, c) in enumerate(zip(scenes, confidences, strict=True))
+            for i, s, c in judged
         ]
-        lines += [
-            f"Acoustic window {i}: {_judged(str(s), float(c), unit)}"
-            for i, (s, c) in enumerate(zip(scenes, confidences, strict=True))
-        ]
+        lines += [f"Acoustic window {i}: {_judged(str(s), float(c), unit)}" for i, s, c in judged]
         first_acoustic = (
             str(scenes[0]),
             float(confidences[0]),
@@ -418,7 +438,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
     visual_predictions: list[Said] = []
     if args.image:
         visual = _role(model, "visual", args.model)
-        X = visual.featurize([read_picture(p) for p in args.image])
+        X = checked_rows(visual.featurize([read_picture(p) for p in args.image]), "pictures")
         visual_predictions = said_of(visual, X)
         unit = visual.confidence_unit
         result["visual"] = [

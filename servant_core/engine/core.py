@@ -56,6 +56,7 @@ from servant_core.events import (
     VisualPrediction,
 )
 from servant_core.features.palette import dominant_colours
+from servant_core.features.rows import UnusableWindow, checked_rows
 from servant_core.fusion import (
     FusionConfig,
     FusionPolicy,
@@ -208,6 +209,8 @@ class Engine:
         self._open_roles: set[str] = set()  # roles whose probabilities know somewhere else
         # the last window's probabilities, where the sound knows somewhere else
         self._previous_window: dict[str, float] | None = None
+        # the predictions whose last window was skipped as unusable: told once, not each window
+        self._skipping: set[str] = set()
         self.sensor_port: str | None = None  # the settings' board the senses were opened on
         # the user's settings the engine was built on, the command line's overrides applied (a
         # front end starts from these, not from the file: `servant run --port P` keeps P)
@@ -369,11 +372,18 @@ class Engine:
     def _guarded(self, what: str, fn: Callable[..., None], *args: Any) -> None:
         try:
             fn(*args)
+        except UnusableWindow as error:
+            if what not in self._skipping:  # one notice for a run of such windows
+                self._skipping.add(what)
+                self._emit(Notice(self.clock(), f"{error}; more are skipped without a word"))
+            return
         except ServantError as error:
             self._error(str(error))
         except Exception as exc:  # e.g. a model trained on another window length: say it, go on
             log.debug("%s failed", what, exc_info=True)
             self._error(f"{what} failed: {type(exc).__name__}: {exc}")
+        else:
+            self._skipping.discard(what)
 
     def _on_window(self, window: np.ndarray, rate: int) -> None:
         with self._lock:
@@ -814,7 +824,9 @@ def decision_unit(*recognisers: Recogniser | None) -> str | None:
 
 
 def _predict(recogniser: Recogniser, X: np.ndarray) -> tuple[str, float, dict[str, float]]:
-    """(scene or UNKNOWN, confidence, {scene: probability}) for a single featurized row."""
+    """(scene or UNKNOWN, confidence, {scene: probability}) for a single featurized row;
+    `UnusableWindow` when the row is not finite numbers."""
+    checked_rows(X, f"{recogniser.sense} prediction")
     scene = str(open_predict(recogniser, X)[0])
     confidence = float(recogniser.confidence(X)[0])
     probabilities = open_probabilities(recogniser, X)[0]

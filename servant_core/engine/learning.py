@@ -26,6 +26,7 @@ from servant_core.audio import DEFAULT_RATE, resample, write_wav
 from servant_core.capture.sample_files import cut_sample_windows, read_samples, write_sample_csv
 from servant_core.capture.sensors import RATES
 from servant_core.errors import ServantError
+from servant_core.features.rows import checked_rows, usable_rows
 from servant_core.fusion.learned import FusionNet, SenseOpinions
 from servant_core.fusion.learning import (
     DEFAULT_FOLDS,
@@ -202,6 +203,7 @@ def folded_in(recogniser: Any, kept: Kept, scene: str) -> Any:
         X = recogniser.featurize([rows])
     else:
         X = recogniser.featurize([kept.data])
+    checked_rows(X, f"{kept.sense} window")
     model = copy.deepcopy(recogniser)
     model.fold_in(X, [scene])
     return model
@@ -272,7 +274,18 @@ def refit_samples(
     windows, scenes = sample_windows(files, stream, rate, window_seconds, on_error, on_progress)
     if not windows:
         return None
-    return model.fit(model.featurize(windows), scenes)
+    X = model.featurize(windows)
+    usable = usable_rows(X)
+    if not np.all(usable):
+        on_error(
+            ServantError(
+                f"{stream} logs: {np.count_nonzero(~usable)} of {len(usable)} windows give "
+                "features that are not finite numbers; they are left out"
+            )
+        )
+        if not np.any(usable):
+            return None
+    return model.fit(X[usable], [s for s, ok in zip(scenes, usable, strict=True) if ok])
 
 
 def library_fusion_net(

@@ -34,6 +34,7 @@ from sklearn.metrics import balanced_accuracy_score
 from sklearn.mixture import GaussianMixture
 from sklearn.model_selection import StratifiedKFold
 
+from servant_core.errors import ServantError
 from servant_core.features.dense_sift import (
     DEFAULT_BIN_SIZES,
     DEFAULT_SIFT_SIZE,
@@ -291,6 +292,11 @@ class FisherBovwVisualRecogniser(LinearHeadAnswers):
         centred = encoded - self.encoding_mean_
         singular, vt = leading_directions(centred, self.head_dim)
         dims = min(self.head_dim, int(np.sum(singular > 1e-6 * singular[0])))
+        if dims == 0:  # every training picture gave the same vector (the same picture)
+            raise ServantError(
+                "the training pictures are all one and the same to this method, so no scene "
+                "can be told from another; add pictures that differ"
+            )
         self.directions_ = vt[:dims].astype(np.float32)
         # one scale for every direction: the leading ones keep their larger share
         self.scale_ = float(np.sqrt(np.mean((centred @ self.directions_.T) ** 2))) or 1.0

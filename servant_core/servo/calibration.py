@@ -42,7 +42,7 @@ def clamp_pose(
             )
         try:
             value = float(angle)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):  # OverflowError: an int beyond floats
             value = math.nan
         if not math.isfinite(value):
             raise ServantError(f"{name}: {angle!r} is not an angle in degrees")

@@ -1,0 +1,39 @@
+"""Ctrl-C is quiet at any time (issue 24 item 8): in the first second, while the libraries were
+still being imported, it once printed a 36-55 line KeyboardInterrupt traceback.
+
+The child says when Python itself has started (its `site` imports are Python's, before any of
+Servant's code runs), then runs what the console script runs; Ctrl-C comes some time later.
+"""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from tests.conftest import REPO
+
+CONSOLE_SCRIPT = (
+    "import os, sys; os.write(1, b'R'); "
+    "from servant_tui.main import main; sys.exit(main())"  # what pip's `servant` script runs
+)
+
+
+@pytest.mark.parametrize("after", [0.05, 0.2, 0.4, 0.8, 1.5])
+def test_ctrl_c_early_prints_no_traceback(after: float, tmp_path) -> None:
+    child = subprocess.Popen(
+        [sys.executable, "-c", CONSOLE_SCRIPT, "eval", "image", str(tmp_path)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        cwd=REPO,
+    )
+    assert child.stdout is not None and child.stdout.read(1) == b"R"
+    time.sleep(after)
+    child.send_signal(signal.SIGINT)
+    _, err = child.communicate(timeout=60)
+    assert b"Traceback" not in err and b"KeyboardInterrupt" not in err, err.decode()
+    assert len(err.splitlines()) <= 1, err.decode()  # the error if it had finished first
+    assert child.returncode in (130, 2), child.returncode

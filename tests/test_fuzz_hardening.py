@@ -1,0 +1,264 @@
+"""Fuzz (issue 24): the classes of input the first fuzz suite did not generate.
+
+- options naming a file the user has: `-o` and `--link` over recordings, documents, symlinks,
+  folders and library names; the user's file is never changed;
+- names with control characters in scene folders and model headers: never printed raw;
+- numbers beyond float range and finite values that overflow inside the features: sensor log
+  rows, board lines and float WAV samples from the extremes of every type;
+- special files (FIFOs, links to /dev/zero, folders, dangling links) wherever a file is read.
+
+Every case ends in success or one `servant: error:` line, in bounded time. About 2,000 cases a
+run (SERVANT_FUZZ_SCALE scales them), in-process.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+import soundfile as sf
+from hypothesis import assume, given
+from hypothesis import strategies as st
+
+from servant_core.capture.sample_files import read_sample_csv
+from servant_core.capture.sensors import CHANNEL_LIMITS, CHANNELS, parse_line
+from servant_core.errors import ServantError
+from tests.cli_harness import assert_clear, run_cli
+from tests.test_fuzz_files import Workspace, fuzz, mutated_model
+from tests.test_fuzz_settings import beyond_floats
+from tests.test_terminal_escapes import CONTROL
+
+SMALL = ["--rate", "8000", "--window", "0.5", "--audio-method", "paper", "--image-method", "paper"]
+
+
+@pytest.fixture(scope="module")
+def ws(tmp_path_factory: pytest.TempPathFactory) -> Workspace:
+    return Workspace(tmp_path_factory.mktemp("fuzz24"))
+
+
+@pytest.fixture(scope="module", autouse=True)
+def models_unchanged(ws: Workspace):
+    """Nothing the fuzzing does may touch the models it reads."""
+    yield
+    assert ws.model.read_bytes() == ws.good_model
+
+
+# Options that name a user's file (item 1).
+
+TARGETS = ["recording", "picture", "document", "link-to-model", "link-to-document", "dangling"]
+TARGETS += ["folder", "library-name", "model", "fresh"]
+
+
+def make_target(ws: Workspace, kind: str, name: str) -> Path:
+    """A file of `kind` at a fresh path: what a user may have where an option points."""
+    folder = ws.root / "targets"
+    folder.mkdir(exist_ok=True)
+    path = folder / f"{name}-{kind}"
+    for old in folder.iterdir():
+        if old.is_symlink() or old.is_file():
+            old.unlink()
+    if kind == "recording":
+        path = path.with_suffix(".wav")
+        path.write_bytes(ws.good_wav.read_bytes())
+    elif kind == "picture":
+        path = path.with_suffix(".png")
+        path.write_bytes(ws.good_png.read_bytes())
+    elif kind == "document":
+        path.write_bytes(b"my notes\n")
+    elif kind == "link-to-model":
+        path.symlink_to(ws.model)
+    elif kind == "link-to-document":
+        (folder / "notes.txt").write_bytes(b"my notes\n")
+        path.symlink_to(folder / "notes.txt")
+    elif kind == "dangling":
+        path.symlink_to(folder / "nowhere")
+    elif kind == "folder":
+        path.mkdir(exist_ok=True)
+    elif kind == "library-name":
+        path = path.with_suffix(".imu.csv")
+    elif kind == "model":
+        path.write_bytes(ws.good_model)
+    return path
+
+
+def snapshot(folder: Path) -> dict[str, tuple[str, bytes | str]]:
+    """Every entry of `folder`: a link's target, a file's bytes."""
+    out: dict[str, tuple[str, bytes | str]] = {}
+    for entry in folder.iterdir():
+        if entry.is_symlink():
+            out[entry.name] = ("link", os.readlink(entry))
+        elif entry.is_file():
+            out[entry.name] = ("file", entry.read_bytes())
+        else:
+            out[entry.name] = ("folder", "")
+    return out
+
+
+@fuzz(40)
+@given(kind=st.sampled_from(TARGETS), name=st.text("abc.-_ ", min_size=1, max_size=8))
+def test_fuzz_train_output_never_destroys_a_users_file(ws: Workspace, kind: str, name) -> None:
+    target = make_target(ws, kind, name.strip(".") or "x")
+    before = snapshot(target.parent)
+    model_before = ws.model.read_bytes()
+    outcome = run_cli("train", str(ws.library), "-o", str(target), *SMALL)
+    assert_clear(outcome)
+    after = snapshot(target.parent)
+    if kind in ("model", "fresh") and outcome.code == 0:
+        after.pop(target.name, None)
+        before.pop(target.name, None)
+    else:
+        assert outcome.code == 2, (kind, outcome.out)
+    assert after == before
+    assert ws.model.read_bytes() == model_before
+    assert not [p for p in target.parent.iterdir() if p.name.endswith(".tmp")]
+
+
+@fuzz(30)
+@given(
+    kind=st.sampled_from(
+        ["document", "recording", "folder", "dangling", "link-to-document", "link-to-model"]
+    ),
+    command=st.sampled_from(["emulate-servo", "emulate-sensors"]),
+)
+def test_fuzz_link_never_destroys_a_users_file(ws: Workspace, kind: str, command: str) -> None:
+    target = make_target(ws, kind, "port")
+    before = snapshot(target.parent)
+    outcome = run_cli(command, "--link", str(target), "--seconds", "0")
+    assert_clear(outcome)
+    if kind == "dangling":  # a stale link: replaced, then removed on exit
+        assert outcome.code == 0 and not target.is_symlink()
+        before.pop(target.name)
+    else:
+        assert outcome.code == 2
+    assert snapshot(target.parent) == before
+
+
+# Names with control characters (item 2).
+
+control_names = st.text(
+    st.sampled_from(CONTROL) | st.characters(codec="utf-8", exclude_categories=["Cs"]),
+    min_size=1,
+    max_size=12,
+)
+
+
+@fuzz(200)
+@given(names=st.lists(control_names, min_size=2, max_size=2, unique=True))
+def test_fuzz_header_scenes_are_never_printed_raw(ws: Workspace, names: list[str]) -> None:
+    def change(arrays: dict[str, np.ndarray]) -> None:
+        header = json.loads(str(arrays["header"]))
+        for state in header["recognisers"].values():
+            renamed = dict(zip(state["scenes"], names, strict=False))
+            state["scenes"] = [renamed.get(s, s) for s in state["scenes"]]
+            state["cluster_scene"] = [renamed.get(s, s) for s in state["cluster_scene"]]
+        arrays["header"] = np.array(json.dumps(header))
+
+    model = mutated_model(ws, ws.model, change)
+    outcome = run_cli(
+        "predict", str(model), "--audio", str(ws.good_wav), "--image", str(ws.good_png)
+    )
+    assert_clear(outcome)
+    assert not [c for c in outcome.out + outcome.err if c in CONTROL], outcome.out
+
+
+# Numbers beyond floats, and finite values that overflow inside the features (items 3, 4).
+
+extreme_numbers = st.one_of(
+    st.floats(width=64),
+    st.floats(width=32),
+    st.floats(min_value=-1e6, max_value=1e6),
+    st.sampled_from([3.4028235e38, 3.5e38, 1e307, -1e307, 1.7976931348623157e308, 0.0]),
+    beyond_floats,
+    st.integers(-(2**64), 2**64),
+).map(lambda v: repr(v) if isinstance(v, float) else str(v))
+
+
+@fuzz(800)
+@given(
+    kind=st.sampled_from(["imu", "ambient"]),
+    rows=st.lists(st.lists(extreme_numbers, min_size=4, max_size=7), min_size=0, max_size=12),
+    good=st.integers(0, 20),
+)
+def test_fuzz_sensor_logs_are_finite_and_in_range_or_one_line(tmp_path_factory, kind, rows, good):
+    channels = CHANNELS[kind]
+    ok = "0,0,9.8,0,0,0" if kind == "imu" else "300,20,1013"
+    lines = [f"{i * 0.01},{ok}" for i in range(good)]
+    lines += [",".join(row[: len(channels) + 1]) for row in rows]
+    path = tmp_path_factory.mktemp("log") / f"log.{kind}.csv"
+    path.write_text(",".join(("time", *channels)) + "\n" + "\n".join(lines) + "\n")
+    try:
+        log = read_sample_csv(path, kind)
+    except ServantError as error:
+        assert "\n" not in str(error)
+        return
+    assert np.isfinite(log.times).all() and np.isfinite(log.values).all()
+    limits = np.array([CHANNEL_LIMITS[c] for c in channels])
+    assert np.all(log.values >= limits[:, 0] - 1e-3) and np.all(log.values <= limits[:, 1] * 1.001)
+
+
+@fuzz(700)
+@given(kind=st.sampled_from(["I", "A"]), fields=st.lists(extreme_numbers, min_size=1, max_size=9))
+def test_fuzz_board_lines_parse_in_range_or_are_refused(kind: str, fields: list[str]) -> None:
+    try:
+        reading = parse_line(f"{kind},{','.join(fields)}\n".encode())
+    except ValueError:
+        return
+    assert reading is not None
+    channels = CHANNELS[reading.kind]
+    for channel, value in zip(channels, reading.values, strict=True):
+        low, high = CHANNEL_LIMITS[channel]
+        assert math.isfinite(value) and low <= value <= high
+
+
+@fuzz(200)
+@given(
+    samples=st.lists(st.floats(width=32), min_size=1, max_size=8),
+    spread=st.integers(1, 400),
+)
+def test_fuzz_float_samples_from_the_whole_float32_range(ws: Workspace, samples, spread) -> None:
+    rng = np.random.default_rng(spread)
+    signal = 0.1 * rng.standard_normal(8000).astype(np.float32)
+    positions = rng.integers(0, len(signal), (len(samples), spread))
+    for value, where in zip(samples, positions, strict=True):
+        signal[where] = value
+    path = ws.root / "extreme.wav"
+    sf.write(path, signal, 8000, subtype="FLOAT")
+    outcome = run_cli("predict", str(ws.model), "--audio", str(path))
+    assert_clear(outcome)
+    assert "nan" not in outcome.out.lower()
+
+
+# Special files wherever a file is read (item 5).
+
+SPECIAL = ["fifo", "zero", "folder", "dangling"]
+READERS = {
+    "model": lambda ws, p: ["predict", str(p), "--image", str(ws.good_png)],
+    "recording": lambda ws, p: ["predict", str(ws.model), "--audio", str(p)],
+    "picture": lambda ws, p: ["predict", str(ws.model), "--image", str(p)],
+    "settings": lambda ws, p: ["servo", "move", "--settings", str(p), "--dry-run", "shoulder=5"],
+    "records": lambda ws, p: ["teach", "--records", str(p)],
+}
+
+
+@fuzz(60)
+@given(kind=st.sampled_from(SPECIAL), reader=st.sampled_from(sorted(READERS)))
+def test_fuzz_special_files_are_one_line_at_once(ws: Workspace, kind: str, reader: str) -> None:
+    assume(not (reader == "records" and kind == "dangling"))  # no records yet: teach asks stdin
+    path = ws.root / f"special-{kind}-{reader}"
+    if path.is_symlink() or path.exists():
+        path.rmdir() if path.is_dir() and not path.is_symlink() else path.unlink()
+    if kind == "fifo":
+        os.mkfifo(path)
+    elif kind == "zero":
+        path.symlink_to("/dev/zero")
+    elif kind == "folder":
+        path.mkdir()
+    else:
+        path.symlink_to(ws.root / "nowhere")
+    outcome = run_cli(*READERS[reader](ws, path))
+    assert_clear(outcome, seconds=10)
+    assert outcome.code == 2 or (kind, reader) == ("dangling", "settings")  # none: the defaults

@@ -1,0 +1,137 @@
+"""Options that name a file never destroy one the user has there (issue 24 item 1).
+
+`--link` replaces only a link; `-o` and the learner's file replace only a file of their own
+kind, never follow or replace a symbolic link, never take a name a scene library reads, and a
+model written over keeps its permissions.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+import time
+from pathlib import Path
+
+import pytest
+
+from servant_core.actions.learner import ActionLearner
+from servant_core.actions.records import TeachRecord, label_scores
+from servant_core.errors import ServantError
+from servant_core.pty_port import PtyPort
+from servant_core.storage import atomic_write_bytes
+from tests.cli_harness import assert_clear, assert_refused, run_cli
+from tests.test_cli_boundaries import SMALL_AUDIO, audio_library
+
+PRECIOUS = b"the user's own words\n"
+
+
+@pytest.mark.parametrize("command", ["emulate-servo", "emulate-sensors"])
+def test_link_refuses_an_existing_file_and_keeps_it(tmp_path: Path, command: str) -> None:
+    precious = tmp_path / "precious.txt"
+    precious.write_bytes(PRECIOUS)
+    outcome = run_cli(command, "--link", str(precious), "--seconds", "0.1")
+    assert_refused(outcome, "precious.txt", "not a link")
+    assert precious.read_bytes() == PRECIOUS and not precious.is_symlink()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["precious.txt"]
+
+
+def test_link_replaces_a_stale_link_and_removes_its_own(tmp_path: Path) -> None:
+    link = tmp_path / "arm"
+    link.symlink_to(tmp_path / "gone")
+    (tmp_path / ".arm.tmp").write_bytes(PRECIOUS)  # the old fixed temporary name: not touched
+    port = PtyPort(link)
+    try:
+        assert os.readlink(link) == port.device
+    finally:
+        port.close()
+    assert not link.is_symlink()
+    assert (tmp_path / ".arm.tmp").read_bytes() == PRECIOUS
+
+
+def test_link_refuses_a_folder(tmp_path: Path) -> None:
+    with pytest.raises(ServantError, match="not a link"):
+        PtyPort(tmp_path)
+    assert tmp_path.is_dir()
+
+
+@pytest.fixture(scope="module")
+def lib(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return audio_library(tmp_path_factory.mktemp("kept") / "lib")
+
+
+def train(lib: Path, output: Path):
+    return run_cli("train", str(lib), "-o", str(output), *SMALL_AUDIO)
+
+
+def test_output_refuses_a_recording_of_the_library(lib: Path) -> None:
+    recording = lib / "cafe" / "r0.wav"
+    before = recording.read_bytes()
+    assert_refused(train(lib, recording), "r0.wav", "audio")
+    assert recording.read_bytes() == before
+
+
+def test_output_refuses_a_library_name_not_yet_there(lib: Path, tmp_path: Path) -> None:
+    assert_refused(train(lib, tmp_path / "new.png"), "new.png", ".npz")
+    assert not (tmp_path / "new.png").exists()
+
+
+def test_output_refuses_a_file_that_is_not_a_model(lib: Path, tmp_path: Path) -> None:
+    precious = tmp_path / "notes.npz"
+    precious.write_bytes(PRECIOUS)
+    assert_refused(train(lib, precious), "notes.npz", "not a model file")
+    assert precious.read_bytes() == PRECIOUS
+
+
+def test_output_refuses_a_symlink_and_leaves_both_ends(lib: Path, tmp_path: Path) -> None:
+    model = tmp_path / "model.npz"
+    assert train(lib, model).code == 0
+    before = model.read_bytes()
+    link = tmp_path / "link.npz"
+    link.symlink_to(model)
+    assert_refused(train(lib, link), "symbolic link", str(model))
+    assert link.is_symlink() and os.readlink(link) == str(model)
+    assert model.read_bytes() == before
+
+
+def test_a_model_written_over_keeps_its_permissions(lib: Path, tmp_path: Path) -> None:
+    model = tmp_path / "model.npz"
+    outcome = train(lib, model)
+    assert_clear(outcome)
+    model.chmod(0o644)
+    assert train(lib, model).code == 0  # a model of its own kind: replaced, as before
+    assert stat.S_IMODE(model.stat().st_mode) == 0o644
+    model.chmod(0o640)
+    atomic_write_bytes(model, model.read_bytes())
+    assert stat.S_IMODE(model.stat().st_mode) == 0o640
+
+
+def test_the_action_learner_refuses_a_file_that_is_not_one(tmp_path: Path) -> None:
+    records = [
+        TeachRecord(scene, label_scores(scene, ["cafe", "gym"]), {"shoulder": angle}, 0.0)
+        for scene, angle in [("cafe", 10.0), ("gym", 80.0)] * 2
+    ]
+    learner = ActionLearner(max_iter=20).fit(records)
+    precious = tmp_path / "learner.npz"
+    precious.write_bytes(PRECIOUS)
+    with pytest.raises(ServantError, match="not an action learner file"):
+        learner.save(precious)
+    assert precious.read_bytes() == PRECIOUS
+    learner.save(tmp_path / "fresh.npz")
+    learner.save(tmp_path / "fresh.npz")  # its own kind: replaced
+
+
+def test_a_save_removes_the_temporaries_a_killed_save_left(tmp_path: Path) -> None:
+    """Issue 24 item 8: a kill during a save left `.model.npz.XXXXXXXX.tmp`, and nothing ever
+    removed it. The next save of that file removes those an hour old; a write going on now
+    (a younger one) and files of other names are kept."""
+    model = tmp_path / "model.npz"
+    stale, fresh = tmp_path / ".model.npz.ab12cd34.tmp", tmp_path / ".model.npz.ef56gh78.tmp"
+    other = tmp_path / ".model.npz.my-own-notes.tmp"
+    for path in (stale, fresh, other):
+        path.write_bytes(PRECIOUS)
+    hours_ago = time.time() - 7200
+    os.utime(stale, (hours_ago, hours_ago))
+    os.utime(other, (hours_ago, hours_ago))
+    atomic_write_bytes(model, b"model")
+    assert not stale.exists() and fresh.exists() and other.read_bytes() == PRECIOUS
+    assert model.read_bytes() == b"model"
