@@ -40,11 +40,6 @@ def to_mono(samples: np.ndarray) -> np.ndarray:
     return samples if samples.ndim == 1 else samples.mean(axis=1, dtype=np.float32)
 
 
-def samples_in_range(samples: np.ndarray) -> bool:
-    """Every sample a number within ±`MAX_AMPLITUDE` (NaN is not)."""
-    return bool(np.all(np.abs(samples) <= MAX_AMPLITUDE))
-
-
 def resample(signal: np.ndarray, rate_in: int, rate_out: int) -> np.ndarray:
     """Polyphase resampling (anti-aliased) from `rate_in` to `rate_out`."""
     if rate_in == rate_out:
@@ -162,21 +157,19 @@ def _decode_mono(path: Path, handle: Any, info: Any) -> np.ndarray:
     limit = int(MAX_RECORDING_SECONDS * info.samplerate)
     mono = np.empty(max(info.frames, 0), dtype=np.float32)
     beyond: list[np.ndarray] = []
-    decoded = 0
+    decoded = damaged = 0
     try:
         with sf.SoundFile(handle) as audio:
             for block in audio.blocks(BLOCK_FRAMES, dtype="float32", always_2d=True):
                 samples = to_mono(block)
-                if not np.all(np.isfinite(samples)):
-                    raise ServantError(
-                        f"{path}: holds samples that are not numbers (NaN or infinity); "
-                        "the file is damaged, record it again"
-                    )
-                if not samples_in_range(samples):
-                    raise ServantError(
-                        f"{path}: holds samples beyond ±{MAX_AMPLITUDE:g} times full scale; "
-                        "the file is damaged, record it again"
-                    )
+                # A damaged stretch (NaN, infinity, or beyond ±MAX_AMPLITUDE: an MP3's broken
+                # frames, which libmpg123 decodes differently from one run to the next) becomes
+                # NaN: the windows it falls in are skipped, each said in one line, the rest of
+                # the recording is kept.
+                bad = ~(np.abs(samples) <= MAX_AMPLITUDE)
+                if np.any(bad):
+                    samples = np.where(bad, np.float32(np.nan), samples)
+                    damaged += int(np.count_nonzero(bad))
                 if decoded + len(samples) > limit:
                     raise _too_long(path)
                 fits = max(0, min(len(samples), len(mono) - decoded))
@@ -188,6 +181,11 @@ def _decode_mono(path: Path, handle: Any, info: Any) -> np.ndarray:
         raise _not_readable(path, first_line(exc)) from None
     if decoded == 0:
         raise ServantError(f"{path}: the audio file is empty; record it again")
+    if damaged == decoded:
+        raise ServantError(
+            f"{path}: holds no sample that is a number within ±{MAX_AMPLITUDE:g} times full "
+            "scale; the file is damaged, record it again"
+        )
     return np.concatenate([mono, *beyond]) if beyond else mono[:decoded]
 
 
