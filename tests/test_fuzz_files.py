@@ -179,13 +179,19 @@ def test_fuzz_wav_header_fields(ws: Workspace, channels, rate, block, bits, data
     samples=st.lists(st.integers(0, 9599), min_size=1, max_size=5),
     value=st.sampled_from([np.nan, np.inf, -np.inf]),
 )
-def test_fuzz_nan_samples_are_refused(ws: Workspace, samples, value) -> None:
+def test_fuzz_nan_samples_skip_their_windows(ws: Workspace, samples, value) -> None:
+    """Each window a sample that is no number falls in is skipped in one line; with none
+    left, one error line."""
     data = bytearray(ws.float_wav)
     start = data.find(b"data") + 8
     for i in samples:
         data[start + 4 * i : start + 4 * i + 4] = np.float32(value).tobytes()
     outcome = ws.predict("--audio", str(ws.case("nan.wav", bytes(data))))
-    assert_refused(outcome, "not numbers")
+    if outcome.code == 0:  # (a sample in the remainder after the last window is never read)
+        assert "Acoustic window" in outcome.out and "nan" not in outcome.out.lower()
+        assert_clear(outcome)
+    else:
+        assert_refused(outcome, "finite numbers")
 
 
 # Pictures (issue 13 item 5).
