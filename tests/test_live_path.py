@@ -335,3 +335,15 @@ def test_an_armed_arm_whose_controller_vanishes_while_still_is_shown_disarmed(em
         assert any(isinstance(e, ArmState) and not e.armed for e in events)
     finally:
         engine.stop()
+
+
+def test_train_without_output_writes_the_model_that_servant_run_loads(tmp_path):
+    """Issue 22 item 2: `servant train LIB` alone writes where `servant` and `servant run` look,
+    so a first start after it has a model (and says nothing about "no model yet")."""
+    library = tmp_path / "library"
+    write_demo_library(library, seed=3)
+    assert cli_main(["train", str(library), "--audio-method", "codebook"]) == 0
+    for args in (None, build_parser().parse_args(["run"])):
+        settings = live_settings(args)
+        assert settings.model is not None and Path(settings.model).is_file()
+        assert settings.model == settings.model_path

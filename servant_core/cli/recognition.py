@@ -42,14 +42,18 @@ from servant_core.recognisers import (
     make_recogniser,
 )
 from servant_core.senses import ROLE_SENSE, SAMPLE_SENSES
-from servant_core.storage import data_dir
+from servant_core.storage import default_model_file
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     train = subparsers.add_parser("train", help="train the recognisers on a scene library")
     train.add_argument("root", type=Path, help="scene library: ROOT/<scene>/<recordings, pictures>")
     train.add_argument(
-        "-o", "--output", type=Path, help="model file (default: models/model.npz in the data dir)"
+        "-o",
+        "--output",
+        type=Path,
+        help="model file (default: the data dir's model.npz, which `servant` and `servant run` "
+        "load at start)",
     )
     _method_options(train)
     _audio_options(train)
@@ -330,7 +334,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             if fusion is not None
             else {"fallback": reason}
         )
-    output = args.output or data_dir() / "models" / "model.npz"
+    output = args.output or default_model_file()
     save_model(output, recognisers, fusion)
     summary["model"] = str(output)
     lines = [f"model written to {output}"]
