@@ -13,7 +13,7 @@ from textual.binding import Binding
 from textual.screen import Screen
 from textual.worker import Worker, WorkerState
 
-from servant_core.event_text import confidence_text, place
+from servant_core.event_text import arm_text, confidence_text, place
 from servant_core.events import (
     AcousticPrediction,
     ArmState,
@@ -183,6 +183,8 @@ class ServantApp(App[None]):
             if changed:
                 self.refresh_bindings()
                 self.log_line(event.t, self._arm_line(event))
+            if event.pose_of is not None:
+                self.log_line(event.t, escape(arm_text(event)))
         elif isinstance(event, (AcousticPrediction, VisualPrediction)) and event.scene:
             self.seen_scenes.add(event.scene)
         line = self._log_text(event)

@@ -213,6 +213,58 @@ def test_train_defaults_to_the_engines_fresh_methods():
     )
 
 
+def test_every_default_is_the_same_across_train_eval_predict_and_run():
+    """Issue 22 item 14: `eval audio` measured the paper's method while `train` fitted
+    kmeans-encoder, and `predict` fused the paper's way while `run` fused in parallel."""
+    parse = build_parser().parse_args
+    train, run = parse(["train", "L"]), parse(["run"])
+    audio, image = parse(["eval", "audio", "L"]), parse(["eval", "image", "L"])
+    fusion, predict = parse(["eval", "fusion", "L"]), parse(["predict", "M"])
+    assert audio.method == train.audio_method == fusion.audio_method
+    assert image.method == train.image_method == fusion.image_method
+    assert predict.policy == fusion.policy == run.policy
+    assert audio.window == train.window
+
+
+@pytest.mark.parametrize(
+    "argv, command",
+    [
+        (["train", "LIB", "--bogus"], "train"),
+        (["eval", "audio", "LIB", "--bogus"], "eval audio"),
+        (["predict", "M", "--bogus", "3"], "predict"),
+        (["run", "--bogus"], "run"),
+        (["servo", "move", "--bogus", "shoulder=3"], "servo move"),
+        (["train", "LIB", "--audio-method", "nope"], "train"),
+    ],
+)
+def test_a_mistyped_option_points_to_its_commands_own_help(argv, command):
+    outcome = run_cli(*argv)
+    assert_refused(outcome, f"servant: error: {command}: ", f"see `servant {command} --help`")
+
+
+def test_servant_run_arm_on_a_missing_port_says_no_such_serial_port():
+    outcome = run_cli_subprocess(
+        *["run", "--headless", "--no-mic", "--no-camera", "--port", "/dev/ttyNOPE", "--arm"],
+        *["--duration", "0.2"],
+    )
+    assert_refused(outcome, "/dev/ttyNOPE: no such serial port", "--arm")
+
+
+def test_predict_numbers_windows_with_their_times(tmp_path):
+    library = audio_library(tmp_path / "lib")
+    model = tmp_path / "m.npz"
+    assert run_cli("train", str(library), "-o", str(model), *SMALL_AUDIO).code == 0
+    clip = write_wav(tmp_path / "clip.wav", tone(300, 1.6, 8000), 8000)
+    outcome = run_cli("predict", str(model), "--audio", str(clip))
+    assert outcome.code == 0, outcome.err
+    lines = outcome.out.splitlines()
+    assert [line.split(":")[0] for line in lines] == [
+        "Acoustic window 0 (0-0.5 s)",
+        "Acoustic window 1 (0.5-1 s)",
+        "Acoustic window 2 (1-1.5 s)",
+    ]
+
+
 def test_train_method_points_to_the_sense_options():
     outcome = run_cli("train", "LIB", "--method", "paper")
     assert_refused(outcome, "--audio-method", "--image-method")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import time
 from pathlib import Path
 
@@ -21,7 +22,7 @@ from servant_core.actions.learner import ActionLearner
 from servant_core.actions.records import TeachRecord, label_scores
 from servant_core.audio import write_wav
 from servant_core.cli import main as cli_main
-from servant_core.cli.live import build_run_engine, live_settings
+from servant_core.cli.live import _event_line, build_run_engine, live_settings
 from servant_core.demo.audio_synth import DEMO_RATE
 from servant_core.demo.scenes import synth_picture, synth_window, write_demo_library
 from servant_core.engine import NO_MODEL, build_demo_engine
@@ -228,6 +229,25 @@ def test_the_confidence_threshold_saved_while_running_decides_whether_the_arm_ac
     assert not any(isinstance(e, ArmState) and e.target for e in strict)
     lenient = walk(Settings(confidence_threshold=10.0), paper=False)
     assert any(isinstance(e, ArmState) and e.target for e in lenient)
+
+
+def test_headless_lines_say_the_arms_moves_in_words():
+    """Issue 22 item 9: `arm armed {'shoulder': 10.000942214313854, …}`, `arm disarmed {}` and
+    `No scene detected  confidence 0.0` were the headless lines; the arm's moves are said as the
+    pose of a place, in whole degrees."""
+    events = walk(Settings(confidence_threshold=10.0), paper=False)
+    lines = [_event_line(e) for e in events if isinstance(e, (ArmState, Decision))]
+    moves = [line for line in lines if line and "arm moved to coffee's pose: " in line]
+    assert moves, lines
+    assert re.search(
+        r"arm moved to coffee's pose: shoulder \d+°, elbow \d+°, gripper \d+°$", moves[0]
+    )
+    assert not any(line and ("{" in line or "confidence 0.0" in line) for line in lines), lines
+    disarmed = ArmState(1.0, True, False, "maestro", "/dev/pts/3", {})
+    assert _event_line(disarmed) == "[   1.00] arm disarmed"
+    assert (
+        _event_line(Decision(2.0, None, 0.0, "No scene detected")) == "[   2.00] No scene detected"
+    )
 
 
 def test_a_first_start_without_a_model_says_what_to_do():

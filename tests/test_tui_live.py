@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 from servant_core.errors import ServantError
-from servant_core.events import ErrorEvent
+from servant_core.events import ArmState, ErrorEvent
 from servant_tui.app import ServantApp
 from servant_tui.screens.dialogs import LabelPrompt
 from servant_tui.widgets.spectrum import Spectrum
@@ -107,3 +108,15 @@ async def test_an_engine_that_cannot_start_is_reported(tmp_path):
         await settle(pilot, lambda: app.live.log_view.lines)
         assert "microphone: no input device" in log_text(app)
         assert app.is_running
+
+
+async def test_the_log_says_the_arm_moved_to_a_scenes_pose(tmp_path):
+    """Issue 22 item 9: a move is a line of the log in words, whole degrees."""
+    moved = ArmState(
+        50.0, True, True, "maestro", "/dev/pts/3", {"shoulder": 10.000942214313854, "elbow": 20.0}
+    )
+    engine = ReplayEngine(script=[dataclasses.replace(moved, pose_of="cafe")])
+    app = ServantApp(engine, library_root=tmp_path)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await settle(pilot, lambda: "moved" in log_text(app))
+        assert "arm moved to cafe's pose: shoulder 10°, elbow 20°" in log_text(app)

@@ -57,6 +57,23 @@ class ServantParser(argparse.ArgumentParser):
         kwargs.setdefault("formatter_class", DefaultsFormatter)
         super().__init__(*args, **kwargs)
 
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        """An option no (sub)command knows is refused by the subcommand it was typed after, so
+        that its line points to that command's `--help` (argparse leaves it to `servant`)."""
+        parsed, extras = super().parse_known_args(args, namespace)
+        if extras and self._subcommand_of(parsed) is not self:
+            self._subcommand_of(parsed).error(f"unrecognized arguments: {' '.join(extras)}")
+        return parsed, extras
+
+    def _subcommand_of(self, parsed: argparse.Namespace) -> argparse.ArgumentParser:
+        """The innermost (sub)command parser that `parsed` went through (`servant eval audio`)."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                chosen = action.choices.get(getattr(parsed, action.dest, None) or "")
+                if isinstance(chosen, ServantParser):
+                    return chosen._subcommand_of(parsed)
+        return self
+
     def error(self, message: str) -> Any:
         """One line, as for every other error (argparse would print the usage first)."""
         hints: list[str] = []

@@ -28,7 +28,7 @@ from servant_core.evaluate import (
     said_of,
 )
 from servant_core.event_text import confidence_text, place
-from servant_core.fusion import POLICIES, FusionConfig, LearnedFusion
+from servant_core.fusion import DEFAULT_POLICY, POLICIES, FusionConfig, LearnedFusion
 from servant_core.library import SceneLibrary, featurize_recordings, read_picture, read_pictures
 from servant_core.modelfile import load_model_and_fusion, save_model
 from servant_core.progress import Progress
@@ -107,7 +107,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         f"(default: {','.join(map(str, DEFAULT_SHOTS))})",
     )
     audio.add_argument(
-        "--method", choices=sorted(ACOUSTIC_METHODS), default="paper", help="acoustic method"
+        "--method",
+        choices=sorted(ACOUSTIC_METHODS),
+        default=FRESH_METHODS["audio"],
+        help="acoustic method (paper: the paper's FFT K-Means)",
     )
     audio.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
     _seeds_option(audio)
@@ -126,7 +129,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="without --test: fraction of each scene's files (by name) that train",
     )
     image.add_argument(
-        "--method", choices=sorted(VISUAL_METHODS), default="paper", help="visual method"
+        "--method",
+        choices=sorted(VISUAL_METHODS),
+        default=FRESH_METHODS["image"],
+        help="visual method (paper: the paper's dominant colours)",
     )
     image.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
     _seeds_option(image)
@@ -219,7 +225,7 @@ def _fusion_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--policy",
         choices=sorted(POLICIES),
-        default="sequential",
+        default=DEFAULT_POLICY,
         help="sequential: the paper's (hear, then look); parallel: both senses at once; "
         "learned: a small neural net over every sense's probabilities (parallel without one)",
     )
@@ -384,11 +390,19 @@ def cmd_predict(args: argparse.Namespace) -> int:
         scenes, confidences = audio.predict(X), audio.confidence(X)
         unit = audio.confidence_unit
         result["acoustic"] = [
-            {"window": i, "scene": str(s), "confidence": float(c), "confidence_unit": unit}
+            {
+                "window": i,
+                "start_s": i * seconds,
+                "end_s": (i + 1) * seconds,
+                "scene": str(s),
+                "confidence": float(c),
+                "confidence_unit": unit,
+            }
             for i, (s, c) in enumerate(zip(scenes, confidences, strict=True))
         ]
         lines += [
-            f"Acoustic window {i}: {_judged(str(s), float(c), unit)}"
+            f"Acoustic window {i} ({i * seconds:g}-{(i + 1) * seconds:g} s): "
+            + _judged(str(s), float(c), unit)
             for i, (s, c) in enumerate(zip(scenes, confidences, strict=True))
         ]
         first_acoustic = (

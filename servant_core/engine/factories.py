@@ -18,6 +18,7 @@ from servant_core.engine.arm import Pose, PoseFor
 from servant_core.engine.core import Engine, fusion_config
 from servant_core.errors import ServantError
 from servant_core.fusion import (
+    DEFAULT_POLICY,
     POLICIES,
     FusionConfig,
     FusionNet,
@@ -78,7 +79,7 @@ def build_demo_engine(
     audio = demo_audio(seed, realtime=realtime, clock=clock if not realtime else None)
     why = None
     if fusion is None:
-        policy = policy or ("sequential" if paper else "parallel")
+        policy = policy or ("sequential" if paper else DEFAULT_POLICY)
         net, why = None, None
         if policy == "learned":
             net, why = demo_fusion_net(seed, {"audio": acoustic, "image": visual, **sensing})
@@ -183,7 +184,7 @@ class LiveSettings:
     camera: int | str | None = 0
     library_root: str | Path | None = None
     user: Any = None
-    policy: str = "parallel"
+    policy: str = DEFAULT_POLICY
     learner: str | Path | None = None
     sensors: Mapping[str, str] = dataclasses.field(default_factory=dict)
 
