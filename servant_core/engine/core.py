@@ -620,7 +620,7 @@ class Engine:
         self,
         library: SceneLibrary | str | Path,
         on_progress: Callable[[int, int], None] | None = None,
-    ) -> None:
+    ) -> list[str]:
         """Refit copies of the recognisers on a scene library (sound, pictures, and each sample
         sense with logs in it), then swap them in (the senses keep running on the old ones
         meanwhile). A sense without a recogniser gets a new one of its
@@ -628,7 +628,7 @@ class Engine:
         be trained (e.g. pictures of one scene only) is reported and keeps its recogniser while
         the other is retrained; if neither can be, the first reason is raised. `on_progress(done,
         total)` is called after each file read, recordings, pictures, then logs, on this
-        thread."""
+        thread. Returns the senses retrained ("audio", "image", …)."""
         if not isinstance(library, SceneLibrary):
             library = SceneLibrary.scan(library)
         with self._update_lock:
@@ -645,9 +645,10 @@ class Engine:
             if not fitted:
                 if failures:
                     raise failures[0]
-                return
+                return []
             for failure in failures:
                 self._error(str(failure))
+            senses = list(fitted)
             with self._lock:
                 if "audio" in fitted:
                     self.acoustic = fitted.pop("audio")
@@ -657,6 +658,7 @@ class Engine:
                 self.retrain_needed = False
             self._relearn_fusion(library)
             self._save_models()
+        return senses
 
     def _relearn_fusion(self, library: SceneLibrary) -> None:
         """The learned policy's net, taught again on the retrained recognisers (called under

@@ -14,6 +14,7 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Header, Static
 
+from servant_core.engine.learning import retrained_text
 from servant_core.errors import ServantError
 from servant_core.evaluate import evaluate_audio
 from servant_core.library import SceneLibrary
@@ -196,13 +197,11 @@ class LibraryScreen(ReportsWorkerErrors, Screen[None]):
     @work(thread=True, exclusive=True, group="retrain", exit_on_error=False)
     def retrain(self, on_progress: OnProgress) -> None:
         library = SceneLibrary.scan(self.root)
-        with_progress(self.app.engine.retrain, library, on_progress)
+        senses = with_progress(self.app.engine.retrain, library, on_progress)
         saved = getattr(self.app.engine, "model_path", None)
         self.post_message(
             RetrainDone(
-                f"retrained on {len(library.scenes)} scenes, {len(library.recordings)} "
-                f"recordings, {len(library.pictures)} pictures"
-                + (f"; model saved to {saved}" if saved else "")
+                retrained_text(senses, library) + (f"; model saved to {saved}" if saved else "")
             )
         )
 

@@ -37,6 +37,7 @@ from textual.widgets import (
 
 from servant_core.audio import DEFAULT_WINDOW_SECONDS, write_wav
 from servant_core.capture.sample_files import write_sample_csv
+from servant_core.engine.learning import retrained_text
 from servant_core.errors import ServantError
 from servant_core.events import SpectrumFrame
 from servant_core.features.palette import dominant_colours
@@ -498,8 +499,8 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
     @work(thread=True, exclusive=True, group="retrain", exit_on_error=False)
     def retrain(self, on_progress: OnProgress) -> None:
         library = SceneLibrary.scan(self.root)
-        with_progress(self.app.engine.retrain, library, on_progress)
-        self.post_message(RetrainDone(f"recognisers retrained on {len(library.scenes)} scenes"))
+        senses = with_progress(self.app.engine.retrain, library, on_progress)
+        self.post_message(RetrainDone(retrained_text(senses, library)))
 
     @on(RetrainDone)
     def retrained(self, message: RetrainDone) -> None:
