@@ -109,6 +109,20 @@ class ArmControl:
         self.link.arm()
         self.emit_state()
 
+    def read_pose(self) -> dict[str, float]:
+        """Where the controller says each joint is, armed or not (a wearer guides the arm by hand
+        disarmed); ServantError if there is no arm or it reports no joint yet."""
+        link = self.link
+        if link is None:
+            raise ServantError(f"{self.why_none}; type the angles instead")
+        angles = dict(link.read_positions())
+        if not angles:
+            raise ServantError(
+                "arm: the controller reports no joint's position yet; guide the arm, or type "
+                "the angles"
+            )
+        return angles
+
     def disarm(self) -> None:
         """Forbid the arm to move; does nothing when no arm is attached (safe to call always)."""
         if self.link is not None:

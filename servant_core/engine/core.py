@@ -530,6 +530,11 @@ class Engine:
         """Forbid the arm to move; does nothing when no arm is attached (safe to call always)."""
         self._arm.disarm()
 
+    def read_arm_pose(self) -> dict[str, float]:
+        """The arm's joints' angles as its controller reports them, armed or not (teach mode's
+        "Use the arm's pose"); ServantError when there is no arm or it says nothing."""
+        return self._arm.read_pose()
+
     def apply_settings(self, settings: Any) -> None:
         """Use the user's settings (`servant_core.settings.Settings`) from now on: the fusion
         windows (when they changed, the current window starts afresh), the confidence threshold,
