@@ -43,7 +43,14 @@ from servant_core.engine import learning
 from servant_core.engine.arm import ArmControl, PoseFor
 from servant_core.engine.bus import EventBus, Subscriber
 from servant_core.engine.learning import Kept, Unknowns
-from servant_core.engine.loop import SPECTRUM_FPS, SPECTRUM_SIZE, Feeling, Hearing, Sight
+from servant_core.engine.loop import (
+    SPECTRUM_FPS,
+    SPECTRUM_SIZE,
+    DeviceMakers,
+    Feeling,
+    Hearing,
+    Sight,
+)
 from servant_core.errors import ServantError
 from servant_core.events import (
     AcousticPrediction,
@@ -195,6 +202,9 @@ class Engine:
         # front end starts from these, not from the file: `servant run --port P` keeps P)
         self.user_settings: Any = None
         self._sensor_port_told: str | None = None
+        # how Settings' camera and microphone are opened while running (None: they stay as built)
+        self.device_makers: DeviceMakers | None = None
+        self._next_audio: AudioSource | None = None  # swapped in on the sense thread
 
     # --- subscribers and status -------------------------------------------------------------
 
@@ -326,6 +336,10 @@ class Engine:
         """One turn: take an audio block if one comes within `timeout`, the readings of the sample
         senses, then let fusion look. Without working audio, the first sample sense waits."""
         hearing = self._hearing
+        with self._lock:
+            next_audio, self._next_audio = self._next_audio, None
+        if next_audio is not None and hearing is not None:
+            hearing.replace(next_audio)
         waited = False
         if hearing is not None and hearing.ok:
             if not hearing.listen(timeout):
@@ -555,6 +569,7 @@ class Engine:
         self._emit(state)
         if self._arm.connected_here:
             self.connect_arm(settings.serial_port, settings.protocol, settings.joints)
+        self._use_devices(settings)
         board = getattr(settings, "sensor_port", None)
         if board != self.sensor_port and board != self._sensor_port_told:
             self._sensor_port_told = board
@@ -565,6 +580,20 @@ class Engine:
                     "motion and ambient senses open with the engine)",
                 )
             )
+
+    def _use_devices(self, settings: Any) -> None:
+        """A camera or microphone changed in Settings is opened now, not at the next start.
+        Compared with the settings the engine last took, so that one given on the command line
+        (`servant run --camera F`) stays until the user changes that field."""
+        before, self.user_settings = self.user_settings, settings
+        makers = self.device_makers
+        if before is None or makers is None:
+            return
+        if settings.camera != before.camera and self._sight is not None:
+            self._sight.replace(makers.camera(settings.camera))
+        if settings.audio_device != before.audio_device and self._hearing is not None:
+            with self._lock:
+                self._next_audio = makers.microphone(settings.audio_device)
 
     # --- what the front end asks for ----------------------------------------------------------
 

@@ -16,6 +16,7 @@ from typing import Any
 from servant_core.capture.source import ManualClock, MonotonicClock
 from servant_core.engine.arm import Pose, PoseFor
 from servant_core.engine.core import Engine, fusion_config
+from servant_core.engine.loop import DeviceMakers
 from servant_core.errors import ServantError
 from servant_core.fusion import (
     DEFAULT_POLICY,
@@ -228,6 +229,11 @@ def build_live_engine(
         )
     engine.sensor_port = user.sensor_port
     engine.user_settings = settings.user
+    rate = settings.rate
+    engine.device_makers = DeviceMakers(
+        camera=lambda spec: Camera(spec if spec is not None else 0),
+        microphone=lambda device: Microphone(device, rate),
+    )
     engine.connect_arm(user.serial_port, user.protocol, user.joints)
     learner_file = Path(settings.learner or default_learner_path())
     if settings.learner is not None or learner_file.is_file():

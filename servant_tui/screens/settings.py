@@ -154,7 +154,7 @@ class SettingsScreen(Screen[None]):
         self.app.settings = self.loaded = settings
         self.saved_form = self.form()
         self.app.log_line(None, f"settings saved to {path}")
-        self.notify(f"Saved to {path}. Devices change at the next start.", title="Settings")
+        self.notify(f"Saved to {path}.", title="Settings")
         return True
 
     @on(Button.Pressed, "#back")
