@@ -5,10 +5,12 @@ from __future__ import annotations
 import dataclasses
 import time
 
+import pytest
+
 from servant_core.errors import ServantError
 from servant_core.events import ArmState, ErrorEvent
 from servant_tui.app import ServantApp
-from servant_tui.screens.dialogs import LabelPrompt
+from servant_tui.screens.dialogs import HelpScreen, LabelPrompt
 from servant_tui.widgets.spectrum import Spectrum
 from tests.tui_replay import ReplayEngine, unknown_scene_script
 
@@ -120,3 +122,23 @@ async def test_the_log_says_the_arm_moved_to_a_scenes_pose(tmp_path):
     async with app.run_test(size=(100, 30)) as pilot:
         await settle(pilot, lambda: "moved" in log_text(app))
         assert "arm moved to cafe's pose: shoulder 10°, elbow 20°" in log_text(app)
+
+
+@pytest.mark.parametrize("size", [(80, 24), (120, 40)])
+async def test_help_scrolls_from_the_keyboard_to_its_last_key(tmp_path, size):
+    """Issue 22 item 8: the key table was cut off at 120x40 and 80x24, and no key scrolled."""
+    app = ServantApp(ReplayEngine(), library_root=tmp_path)
+    async with app.run_test(size=size) as pilot:
+        await pilot.press("question_mark")
+        await settle(pilot, lambda: isinstance(app.screen, HelpScreen))
+        text = app.screen.query_one("#help-text")
+        close = app.screen.query_one("#close")
+        assert close.region.bottom <= size[1], "the Close button is on the screen"
+        assert text.has_focus
+        await pilot.press("end")
+        await pilot.pause()
+        assert text.scroll_y == text.max_scroll_y  # the end of the text, its last key, in view
+        if text.max_scroll_y:
+            await pilot.press("home", "down")
+            await pilot.pause()
+            assert text.scroll_y == 1
