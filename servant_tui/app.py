@@ -63,6 +63,12 @@ PROMPT_AFTER_SKIP_S = 300.0
 HEAP_TRIM_EVERY_S = 60.0
 
 
+def log_confidence(event: Any) -> str:
+    """A confidence for the log, its unit bound to its number: the log wraps at spaces, and
+    "(67.5" at the end of one row with "%)" alone on the next reads badly."""
+    return confidence_text(event.confidence, event.confidence_unit).replace(" %", "%")
+
+
 class ServantApp(App[None]):
     TITLE = "Servant"
     CSS_PATH = "app.tcss"
@@ -211,7 +217,7 @@ class ServantApp(App[None]):
             leaned = leaned_text(event)
             because = f"; {leaned}" if leaned else ""
             if event.scene:
-                confidence = confidence_text(event.confidence, event.confidence_unit)
+                confidence = log_confidence(event)
                 return f"[bold green]{escape(event.line)} [/]({confidence}{because})"
             if leaned:
                 return f"[yellow]{escape(event.line)} [/]({leaned})"
@@ -220,12 +226,12 @@ class ServantApp(App[None]):
             verb = "hears" if isinstance(event, AcousticPrediction) else "sees"
             if event.scene is None:  # a confidence in no scene says nothing
                 return f"{verb} {place(None)}"
-            confidence = confidence_text(event.confidence, event.confidence_unit)
+            confidence = log_confidence(event)
             return f"{verb} {escape(place(event.scene))} ({confidence})"
         if isinstance(event, SensePrediction):
             if event.scene is None:
                 return f"{event.sense}: {place(None)}"
-            confidence = confidence_text(event.confidence, event.confidence_unit)
+            confidence = log_confidence(event)
             return f"{event.sense}: {escape(place(event.scene))} ({confidence})"
         if isinstance(event, UnknownScene):
             nearest = f", nearest {escape(event.nearest_scene)}" if event.nearest_scene else ""
