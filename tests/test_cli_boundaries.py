@@ -296,6 +296,17 @@ def test_bar_line_counts_and_estimates():
     assert bar_line("listening", 4, 4, 75.0).endswith("4/4  done in 1:15")
 
 
+def test_a_bar_line_fits_in_one_row_of_the_terminal():
+    """Issue 22 item 10: the demo's 82-character line wrapped at 80 columns, one row more per
+    redraw."""
+    label = "servant demo: learning the demo's places"
+    wide = bar_line(label, 4, 5, 8.0)
+    assert len(wide) > 79
+    narrow = bar_line(label, 4, 5, 8.0, columns=80)
+    assert len(narrow) <= 79 and narrow.endswith("4/5  0:02 left") and "[####" in narrow
+    assert len(bar_line(label, 4, 5, 8.0, columns=40)) <= 39
+
+
 class Terminal(io.StringIO):
     def isatty(self) -> bool:
         return True
