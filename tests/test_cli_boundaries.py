@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 import io
 import os
+import subprocess
+import sys
 import zlib
 from pathlib import Path
 
@@ -184,7 +186,7 @@ def test_library_warnings_stay_out_of_the_output(tmp_path, capfd):
 
 
 def all_parsers():
-    stack = [build_parser()]
+    stack = [build_parser(lazy=False)]
     while stack:
         parser = stack.pop()
         yield parser
@@ -203,6 +205,19 @@ def test_every_option_has_help_and_help_shows_defaults():
             assert action.help, f"{parser.prog} {action.option_strings or action.dest}"
     text = run_cli("train", "--help").out
     assert "(default: 5.0)" in text and f"(default: {FRESH_METHODS['audio']})" in text
+
+
+def test_servant_help_loads_none_of_the_heavy_libraries():
+    """Issue 22 item 14: `servant --help` took 2.2-2.6 s, importing every command's libraries
+    (bench/cli_startup.py measures it)."""
+    code = (
+        "import sys\nfrom servant_tui.main import main\ntry:\n    main(['--help'])\n"
+        "except SystemExit:\n    pass\n"
+        "print([m for m in ('numpy', 'scipy', 'sklearn', 'cv2', 'textual') if m in sys.modules])"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert "train" in result.stdout and result.stdout.strip().endswith("[]"), result.stdout
 
 
 def test_train_defaults_to_the_engines_fresh_methods():

@@ -38,7 +38,6 @@ MAX_EMULATE_S = 7 * 24 * 3600.0
 def register(subparsers: argparse._SubParsersAction) -> None:
     teach = subparsers.add_parser(
         "teach",
-        help="teach the arm a pose per scene, then ask it (the paper's Fig. 6 session)",
         description="A line-oriented session on stdin/stdout. Training phase: a scene label, then "
         "the action (an angle for --joint, `joint=angle ...`, or `record [seconds]` to read the "
         "pose the arm is guided into); an empty label ends it. The learner trains, printing its "
@@ -64,7 +63,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     teach.set_defaults(handler=run_teach)
 
-    servo = subparsers.add_parser("servo", help="drive or query the arm's servo controller")
+    servo = subparsers.add_parser("servo")
     commands = servo.add_subparsers(dest="servo_command", metavar="SERVO_COMMAND", required=True)
     ports = commands.add_parser("list-ports", help="list the serial ports of this machine")
     ports.add_argument("--json", action="store_true", help="print JSON")
@@ -80,10 +79,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _link_options(query)
     query.set_defaults(handler=run_query)
 
-    emulate = subparsers.add_parser(
-        "emulate-servo",
-        help="run a servo controller emulator on a pseudo-terminal (prints the port)",
-    )
+    emulate = subparsers.add_parser("emulate-servo")
     emulate.add_argument("--protocol", choices=sorted(PROTOCOLS), default="maestro")
     emulate.add_argument("--link", help="also make this path a symlink to the port (a stable name)")
     emulate.add_argument(

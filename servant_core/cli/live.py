@@ -51,7 +51,6 @@ def register(subparsers: Any) -> None:
 
     run = subparsers.add_parser(
         "run",
-        help="recognise scenes from the live microphone and camera, and move the arm",
         description=RUN_DESCRIPTION,
     )
     run.add_argument(
@@ -105,7 +104,6 @@ def register(subparsers: Any) -> None:
 
     demo = subparsers.add_parser(
         "demo",
-        help="the built-in demo scenes (no microphone, camera or arm needed)",
         description=DEMO_DESCRIPTION,
     )
     demo.add_argument("--seed", type=int, default=0, help="seed of the synthesised scenes")

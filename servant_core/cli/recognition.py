@@ -46,7 +46,7 @@ from servant_core.storage import default_model_file
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    train = subparsers.add_parser("train", help="train the recognisers on a scene library")
+    train = subparsers.add_parser("train")
     train.add_argument("root", type=Path, help="scene library: ROOT/<scene>/<recordings, pictures>")
     train.add_argument(
         "-o",
@@ -71,9 +71,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _json_option(train)
     train.set_defaults(handler=cmd_train)
 
-    predict = subparsers.add_parser(
-        "predict", help="recognise a recording and/or pictures with a model"
-    )
+    predict = subparsers.add_parser("predict")
     predict.add_argument("model", type=Path, help="model file from `servant train`")
     predict.add_argument("--audio", type=Path, help="a recording: each window is recognised")
     predict.add_argument("--image", type=Path, nargs="+", default=[], help="pictures, in order")
@@ -81,7 +79,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _json_option(predict)
     predict.set_defaults(handler=cmd_predict)
 
-    evaluate = subparsers.add_parser("eval", help="evaluate a method on a scene library")
+    evaluate = subparsers.add_parser("eval")
     senses = evaluate.add_subparsers(dest="sense", metavar="SENSE", required=True)
     audio = senses.add_parser(
         "audio", help="acoustic recognition: temporal, recording or fewshot protocol"
@@ -152,7 +150,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _json_option(fusion)
     fusion.set_defaults(handler=cmd_eval_fusion)
 
-    table = subparsers.add_parser("table", help="the paper's Table I and Table II for a library")
+    table = subparsers.add_parser("table")
     table.add_argument("library", type=Path, help="scene library with recordings and pictures")
     table.add_argument("--test", type=Path, help="take the test recording and picture from here")
     table.add_argument(
