@@ -367,3 +367,17 @@ def test_train_without_output_writes_the_model_that_servant_run_loads(tmp_path):
         settings = live_settings(args)
         assert settings.model is not None and Path(settings.model).is_file()
         assert settings.model == settings.model_path
+
+
+def test_settings_in_the_demo_show_the_emulated_arms_port():
+    """Issue 22 item 11: Settings in the demo showed an empty serial port while the arm was on
+    a pty."""
+    from servant_tui.app import ServantApp
+
+    engine = build_demo_engine(seed=0, realtime=False)
+    try:
+        assert engine.link is not None and engine.link.port
+        settings = ServantApp(engine, mode="demo").settings
+        assert settings.serial_port == engine.link.port and settings.protocol == "maestro"
+    finally:
+        engine.stop()

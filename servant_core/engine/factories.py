@@ -109,6 +109,10 @@ def build_demo_engine(
         engine.add_cleanup(link.close)  # runs first: the link closes before its emulator
         engine.set_arm(link)
         engine.set_action_learner(pose_for_taught(demo_learner()))
+        from servant_core.settings import Settings
+
+        # what Settings shows in the demo: the emulated arm's port, not the empty default
+        engine.user_settings = Settings(serial_port=link.port, protocol=link.protocol.name)
     return engine
 
 
