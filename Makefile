@@ -1,10 +1,12 @@
 # Two commands on a fresh machine: `make demo` and `make test`. Both set everything up first.
+# `make install` then puts `servant` on the PATH (a link in BINDIR).
 VENV ?= .venv
+BINDIR ?= $(HOME)/.local/bin
 PY := $(VENV)/bin/python
 SHARED ?= ../shared
 VMIC := $(SHARED)/scripts/virtual-mic.sh
 
-.PHONY: setup demo test bench lint
+.PHONY: setup install demo test bench lint
 
 setup: $(VENV)/.installed
 
@@ -15,8 +17,14 @@ $(VENV)/.installed: pyproject.toml
 	$(PY) -m pip install -q -e '.[test]'
 	touch $@
 
+install: setup
+	bash scripts/install-servant $(VENV) $(BINDIR)
+
+# After the demo: how to type `servant` alone, unless it already works.
 demo: setup
-	$(VENV)/bin/servant demo
+	@$(VENV)/bin/servant demo; status=$$?; \
+	command -v servant >/dev/null || echo "servant: to type \`servant\` in any shell: make install"; \
+	exit $$status
 
 # The virtual microphone (a PulseAudio null sink) lets the capture tests record through PortAudio.
 test: setup

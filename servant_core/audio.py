@@ -9,7 +9,6 @@ from typing import Any, BinaryIO, TypeVar
 
 import numpy as np
 import soundfile as sf
-from scipy.signal import resample_poly
 
 from servant_core.errors import ServantError
 from servant_core.storage import atomic_write_bytes, open_regular_file, os_reason
@@ -45,6 +44,8 @@ def resample(signal: np.ndarray, rate_in: int, rate_out: int) -> np.ndarray:
     if rate_in == rate_out:
         return np.asarray(signal, dtype=np.float32)
     ratio = Fraction(rate_out, rate_in)
+    from scipy.signal import resample_poly  # scipy.signal takes a second to import: on use
+
     out = resample_poly(signal, ratio.numerator, ratio.denominator)
     return out.astype(np.float32, copy=False)
 

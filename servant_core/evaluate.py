@@ -55,6 +55,9 @@ from servant_core.recognisers.background import kept_out
 from servant_core.recognisers.base import open_predict, open_probabilities
 
 PROTOCOLS = ("temporal", "recording", "source", "fewshot")
+# For a library taught in the app, 5 s at a time: `temporal` where recordings are long enough to
+# split, else `recording` (leave one out: each recording is one sample). The result names which.
+TAUGHT = "taught"
 DEFAULT_SHOTS = (1, 2, 3, 5, 10)
 TRAIN_FRACTION = 0.6
 IMAGE_TRAIN_FRACTION = 0.7
@@ -261,6 +264,12 @@ def audio_plans(
     group of `wf.recordings[i]`; default: each recording's source), `fewshot` one row per number
     of shots (each tested on the temporal test part)."""
     temporal = temporal_split(wf.recording, wf.position)
+    if protocol == TAUGHT:
+        if (~temporal).any():
+            protocol = "temporal"
+        else:
+            _check_samples_to_leave_out(wf)
+            protocol = "recording"
     if protocol == "temporal":
         return [AudioPlan(protocol, [temporal], [~temporal])]
     if protocol == "fewshot":
@@ -279,6 +288,24 @@ def audio_plans(
         return [AudioPlan(protocol, [~t for t in tests], tests, left_out=left_out)]
     rows = [wf.recording != r for r in np.unique(wf.recording)]
     return [AudioPlan(protocol, rows, [~row for row in rows])]
+
+
+def _check_samples_to_leave_out(wf: WindowFeatures) -> None:
+    """Leaving one sample out needs two places, each with two samples or more (a place whose
+    only sample is left out cannot be recognised); if not, what to record (teach mode's words)."""
+    per_scene = Counter(str(wf.scenes[wf.recording == r][0]) for r in np.unique(wf.recording))
+    if len(per_scene) < 2:
+        raise ServantError(
+            "nothing to evaluate yet: teach a second place in teach mode (key t), with two "
+            "recordings or more"
+        )
+    single = sorted(scene for scene, n in per_scene.items() if n < 2)
+    if single:
+        raise ServantError(
+            f"nothing to evaluate yet: record another sample of {', '.join(single)} in teach "
+            "mode (key t); each recording here is one window, and one is left out at a time to "
+            "test"
+        )
 
 
 def seeded_params(
@@ -437,7 +464,7 @@ def evaluate_audio(
     row per number of `shots` under `rows`. `source` leaves out one group of recordings at a
     time: `groups` (recording path relative to the root -> group) or each file's source. With
     `seeds` > 1 every figure is a mean over random states 0..seeds-1 (see `over_seeds`)."""
-    if protocol not in PROTOCOLS:
+    if protocol not in (*PROTOCOLS, TAUGHT):
         raise ServantError(f"unknown protocol {protocol!r}; choose {', '.join(PROTOCOLS)}")
     if protocol == "fewshot" and (not shots or min(shots) < 1):
         raise ServantError("--shots needs whole numbers of windows, each at least 1 (e.g. 1,3,10)")

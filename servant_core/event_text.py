@@ -9,6 +9,8 @@ recogniser says it is a probability in percent; the paper's eq. 1 and eq. 2 are 
 
 from __future__ import annotations
 
+from typing import Any
+
 UNKNOWN_PLACE = "an unknown place"
 
 
@@ -22,3 +24,20 @@ def confidence_text(confidence: float, unit: str | None, width: int = 0) -> str:
     is not known; the number is right-aligned in at least `width` characters."""
     number = f"{confidence:{width}.1f}"
     return f"{number} {unit}" if unit else number
+
+
+def pose_text(pose: dict[str, float]) -> str:
+    """A pose in words, whole degrees ("shoulder 10°, elbow 20°"): a servo's step is coarser
+    than a degree, so decimals would only show the float arithmetic of the speed limits."""
+    return ", ".join(f"{joint} {round(angle):d}°" for joint, angle in pose.items()) or "no joint"
+
+
+def arm_text(state: Any) -> str:
+    """An `ArmState` in words: the move it has just made, else whether it is armed."""
+    if state.pose_of is not None:
+        return f"arm moved to {state.pose_of}'s pose: {pose_text(state.angles)}"
+    if not state.connected:
+        return "arm not connected"
+    if state.armed:
+        return f"arm armed, at {pose_text(state.angles)}"
+    return "arm disarmed"

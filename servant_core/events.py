@@ -133,6 +133,7 @@ class ArmState:
     port: str | None
     angles: dict[str, float]  # current angle per joint, degrees
     target: dict[str, float] | None = None  # the pose about to be sent
+    pose_of: str | None = None  # the scene whose pose the arm has just taken (after a move)
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,7 @@ is never mixed with bars.
 
 from __future__ import annotations
 
+import shutil
 import sys
 import time
 from collections.abc import Callable
@@ -16,19 +17,26 @@ from typing import TextIO
 BAR_WIDTH = 24
 
 
-def bar_line(label: str, done: int, total: int, elapsed: float) -> str:
-    """`label [#######.....] 12/40  0:35 left` (pure: the estimate assumes a steady pace)."""
+def bar_line(label: str, done: int, total: int, elapsed: float, columns: int = 0) -> str:
+    """`label [#######.....] 12/40  0:35 left` (pure: the estimate assumes a steady pace).
+    With `columns`, the bar narrows (down to 5) so that the line fits in one row less a
+    column: a line as wide as the terminal wraps, and each redraw would add a row."""
     total = max(total, 1)
     done = min(max(done, 0), total)
-    filled = BAR_WIDTH * done // total
-    bar = "#" * filled + "." * (BAR_WIDTH - filled)
     if done == total:
         tail = f"done in {_clock(elapsed)}"
     elif done == 0:
         tail = ""
     else:
         tail = f"{_clock(elapsed / done * (total - done))} left"
-    return f"{label} [{bar}] {done}/{total}  {tail}".rstrip()
+    rest = f" {done}/{total}  {tail}".rstrip()
+    width = BAR_WIDTH
+    if columns:
+        width = min(BAR_WIDTH, max(columns - 1 - len(label) - 3 - len(rest), 5))
+    filled = width * done // total
+    bar = "#" * filled + "." * (width - filled)
+    line = f"{label} [{bar}]{rest}"
+    return line[: columns - 1] if columns else line
 
 
 def _clock(seconds: float) -> str:
@@ -67,6 +75,7 @@ class Progress:
         if not finished and now - self.drawn_at < self.interval:
             return
         self.drawn_at = now
-        line = bar_line(self.label, done, total, now - self.started)
+        columns = shutil.get_terminal_size().columns
+        line = bar_line(self.label, done, total, now - self.started, columns)
         self.stream.write("\r\x1b[K" + line + ("\n" if finished else ""))
         self.stream.flush()

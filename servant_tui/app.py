@@ -13,7 +13,7 @@ from textual.binding import Binding
 from textual.screen import Screen
 from textual.worker import Worker, WorkerState
 
-from servant_core.event_text import confidence_text, place
+from servant_core.event_text import arm_text, confidence_text, place
 from servant_core.events import (
     AcousticPrediction,
     ArmState,
@@ -61,6 +61,12 @@ PROMPT_AFTER_SKIP_S = 300.0
 # segments leave free pages in glibc's heaps (its per-thread arenas among them) that it does not
 # return by itself (issue 13's soak, a prompt left open: +4.4 MB/h untrimmed, +0.8 trimmed).
 HEAP_TRIM_EVERY_S = 60.0
+
+
+def log_confidence(event: Any) -> str:
+    """A confidence for the log, its unit bound to its number: the log wraps at spaces, and
+    "(67.5" at the end of one row with "%)" alone on the next reads badly."""
+    return confidence_text(event.confidence, event.confidence_unit).replace(" %", "%")
 
 
 class ServantApp(App[None]):
@@ -183,6 +189,8 @@ class ServantApp(App[None]):
             if changed:
                 self.refresh_bindings()
                 self.log_line(event.t, self._arm_line(event))
+            if event.pose_of is not None:
+                self.log_line(event.t, escape(arm_text(event)))
         elif isinstance(event, (AcousticPrediction, VisualPrediction)) and event.scene:
             self.seen_scenes.add(event.scene)
         line = self._log_text(event)
@@ -209,7 +217,7 @@ class ServantApp(App[None]):
             leaned = leaned_text(event)
             because = f"; {leaned}" if leaned else ""
             if event.scene:
-                confidence = confidence_text(event.confidence, event.confidence_unit)
+                confidence = log_confidence(event)
                 return f"[bold green]{escape(event.line)} [/]({confidence}{because})"
             if leaned:
                 return f"[yellow]{escape(event.line)} [/]({leaned})"
@@ -218,12 +226,12 @@ class ServantApp(App[None]):
             verb = "hears" if isinstance(event, AcousticPrediction) else "sees"
             if event.scene is None:  # a confidence in no scene says nothing
                 return f"{verb} {place(None)}"
-            confidence = confidence_text(event.confidence, event.confidence_unit)
+            confidence = log_confidence(event)
             return f"{verb} {escape(place(event.scene))} ({confidence})"
         if isinstance(event, SensePrediction):
             if event.scene is None:
                 return f"{event.sense}: {place(None)}"
-            confidence = confidence_text(event.confidence, event.confidence_unit)
+            confidence = log_confidence(event)
             return f"{event.sense}: {escape(place(event.scene))} ({confidence})"
         if isinstance(event, UnknownScene):
             nearest = f", nearest {escape(event.nearest_scene)}" if event.nearest_scene else ""

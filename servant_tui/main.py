@@ -68,10 +68,6 @@ def _interrupted(error: BaseException) -> bool:
 
 def _main(argv: Sequence[str] | None) -> int:
     from servant_core.cli import run_handler
-    from servant_core.cli.live import build_run_engine
-    from servant_core.demo.space import throwaway_space
-    from servant_core.engine import build_demo_engine
-    from servant_core.progress import Progress
     from servant_tui.heap import limit_heaps
     from servant_tui.memtrace import start_from_environment as start_memtrace
 
@@ -79,9 +75,16 @@ def _main(argv: Sequence[str] | None) -> int:
     limit_heaps()  # before the engine's and Textual's threads start
     start_memtrace()  # a developer option, off unless SERVANT_MEMTRACE is set
     headless = getattr(args, "headless", False)
+    # the engine's modules load only for the commands that start one (not for `--help`)
     if args.command is None or (args.command == "run" and not headless and not args.list_devices):
+        from servant_core.cli.live import build_run_engine
+
         return run_tui(lambda: build_run_engine(args if args.command else None), "live")
     if args.command == "demo" and not headless and not args.fast:
+        from servant_core.demo.space import throwaway_space
+        from servant_core.engine import build_demo_engine
+        from servant_core.progress import Progress
+
         with throwaway_space() as space:
             return run_tui(
                 lambda: build_demo_engine(

@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 import io
 import os
+import subprocess
+import sys
 import zlib
 from pathlib import Path
 
@@ -207,7 +209,7 @@ def test_a_damaged_stretch_loses_its_windows_not_the_recording(tmp_path):
 
 
 def all_parsers():
-    stack = [build_parser()]
+    stack = [build_parser(lazy=False)]
     while stack:
         parser = stack.pop()
         yield parser
@@ -228,12 +230,77 @@ def test_every_option_has_help_and_help_shows_defaults():
     assert "(default: 5.0)" in text and f"(default: {FRESH_METHODS['audio']})" in text
 
 
+def test_servant_help_loads_none_of_the_heavy_libraries():
+    """Issue 22 item 14: `servant --help` took 2.2-2.6 s, importing every command's libraries
+    (bench/cli_startup.py measures it)."""
+    code = (
+        "import sys\nfrom servant_tui.main import main\ntry:\n    main(['--help'])\n"
+        "except SystemExit:\n    pass\n"
+        "print([m for m in ('numpy', 'scipy', 'sklearn', 'cv2', 'textual') if m in sys.modules])"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert "train" in result.stdout and result.stdout.strip().endswith("[]"), result.stdout
+
+
 def test_train_defaults_to_the_engines_fresh_methods():
     args = build_parser().parse_args(["train", "LIB"])
     assert (args.audio_method, args.image_method) == (
         FRESH_METHODS["audio"],
         FRESH_METHODS["image"],
     )
+
+
+def test_every_default_is_the_same_across_train_eval_predict_and_run():
+    """Issue 22 item 14: `eval audio` measured the paper's method while `train` fitted
+    kmeans-encoder, and `predict` fused the paper's way while `run` fused in parallel."""
+    parse = build_parser().parse_args
+    train, run = parse(["train", "L"]), parse(["run"])
+    audio, image = parse(["eval", "audio", "L"]), parse(["eval", "image", "L"])
+    fusion, predict = parse(["eval", "fusion", "L"]), parse(["predict", "M"])
+    assert audio.method == train.audio_method == fusion.audio_method
+    assert image.method == train.image_method == fusion.image_method
+    assert predict.policy == fusion.policy == run.policy
+    assert audio.window == train.window
+
+
+@pytest.mark.parametrize(
+    "argv, command",
+    [
+        (["train", "LIB", "--bogus"], "train"),
+        (["eval", "audio", "LIB", "--bogus"], "eval audio"),
+        (["predict", "M", "--bogus", "3"], "predict"),
+        (["run", "--bogus"], "run"),
+        (["servo", "move", "--bogus", "shoulder=3"], "servo move"),
+        (["train", "LIB", "--audio-method", "nope"], "train"),
+    ],
+)
+def test_a_mistyped_option_points_to_its_commands_own_help(argv, command):
+    outcome = run_cli(*argv)
+    assert_refused(outcome, f"servant: error: {command}: ", f"see `servant {command} --help`")
+
+
+def test_servant_run_arm_on_a_missing_port_says_no_such_serial_port():
+    outcome = run_cli_subprocess(
+        *["run", "--headless", "--no-mic", "--no-camera", "--port", "/dev/ttyNOPE", "--arm"],
+        *["--duration", "0.2"],
+    )
+    assert_refused(outcome, "/dev/ttyNOPE: no such serial port", "--arm")
+
+
+def test_predict_numbers_windows_with_their_times(tmp_path):
+    library = audio_library(tmp_path / "lib")
+    model = tmp_path / "m.npz"
+    assert run_cli("train", str(library), "-o", str(model), *SMALL_AUDIO).code == 0
+    clip = write_wav(tmp_path / "clip.wav", tone(300, 1.6, 8000), 8000)
+    outcome = run_cli("predict", str(model), "--audio", str(clip))
+    assert outcome.code == 0, outcome.err
+    lines = outcome.out.splitlines()
+    assert [line.split(":")[0] for line in lines] == [
+        "Acoustic window 0 (0-0.5 s)",
+        "Acoustic window 1 (0.5-1 s)",
+        "Acoustic window 2 (1-1.5 s)",
+    ]
 
 
 def test_train_method_points_to_the_sense_options():
@@ -265,6 +332,17 @@ def test_bar_line_counts_and_estimates():
     assert bar_line("listening", 0, 4, 0.0) == "listening [" + "." * 24 + "] 0/4"
     assert bar_line("listening", 1, 4, 10.0).endswith("1/4  0:30 left")
     assert bar_line("listening", 4, 4, 75.0).endswith("4/4  done in 1:15")
+
+
+def test_a_bar_line_fits_in_one_row_of_the_terminal():
+    """Issue 22 item 10: the demo's 82-character line wrapped at 80 columns, one row more per
+    redraw."""
+    label = "servant demo: learning the demo's places"
+    wide = bar_line(label, 4, 5, 8.0)
+    assert len(wide) > 79
+    narrow = bar_line(label, 4, 5, 8.0, columns=80)
+    assert len(narrow) <= 79 and narrow.endswith("4/5  0:02 left") and "[####" in narrow
+    assert len(bar_line(label, 4, 5, 8.0, columns=40)) <= 39
 
 
 class Terminal(io.StringIO):

@@ -47,7 +47,9 @@ def test_eval_audio_both_protocols_end_to_end(small_library, capsys):
     assert set(temporal["per_class"]) == {"cafe", "street", "vehicle"}
     assert 0.0 <= temporal["balanced_accuracy"] <= 1.0 and temporal["log_loss"] >= 0
     recording = run_json(
-        capsys, "eval", "audio", str(small_library), "--protocol", "recording", "--rate", "16000"
+        capsys,
+        *["eval", "audio", str(small_library), "--protocol", "recording", "--rate", "16000"],
+        *["--method", "paper"],
     )
     # one recording per scene: each left-out scene is absent from its training set
     assert recording["n_test"] == 11 + 7 + 12

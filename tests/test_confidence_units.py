@@ -81,4 +81,4 @@ def test_servant_predict_says_each_confidences_unit(tmp_path, capsys):
         capsys.readouterr()
         assert main(["predict", str(model), "--audio", str(clip)]) == 0
         line = capsys.readouterr().out.strip().splitlines()[0]
-        assert line.startswith("Acoustic window 0: ") and line.endswith(f" {unit})"), line
+        assert line.startswith("Acoustic window 0 (0-5 s): ") and line.endswith(f" {unit})"), line

@@ -225,11 +225,8 @@ def test_a_sense_that_cannot_be_retrained_is_reported_and_the_other_still_is(rec
     engine.retrain(root)  # pictures of one scene only: the camera's recogniser cannot learn
     assert engine.acoustic is not acoustic and engine.visual is visual
     errors = [e.message for e in events if isinstance(e, ErrorEvent)]
-    assert (
-        len(errors) == 1
-        and errors[0].startswith("retrain (pictures): ")
-        and "two scenes" in errors[0]
-    )
+    assert len(errors) == 1 and errors[0].startswith("pictures: only coffee has any")
+    assert "take pictures of gym, street" in errors[0]  # in teach mode's words (issue 22 item 7)
     (root / "gym" / "w.wav").unlink()
     (root / "street" / "w.wav").unlink()
     with pytest.raises(ServantError):  # neither sense has two scenes: nothing changes

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import time
 from pathlib import Path
 
@@ -21,7 +22,7 @@ from servant_core.actions.learner import ActionLearner
 from servant_core.actions.records import TeachRecord, label_scores
 from servant_core.audio import write_wav
 from servant_core.cli import main as cli_main
-from servant_core.cli.live import build_run_engine, live_settings
+from servant_core.cli.live import _event_line, build_run_engine, live_settings
 from servant_core.demo.audio_synth import DEMO_RATE
 from servant_core.demo.scenes import synth_picture, synth_window, write_demo_library
 from servant_core.engine import NO_MODEL, build_demo_engine
@@ -230,6 +231,25 @@ def test_the_confidence_threshold_saved_while_running_decides_whether_the_arm_ac
     assert any(isinstance(e, ArmState) and e.target for e in lenient)
 
 
+def test_headless_lines_say_the_arms_moves_in_words():
+    """Issue 22 item 9: `arm armed {'shoulder': 10.000942214313854, …}`, `arm disarmed {}` and
+    `No scene detected  confidence 0.0` were the headless lines; the arm's moves are said as the
+    pose of a place, in whole degrees."""
+    events = walk(Settings(confidence_threshold=10.0), paper=False)
+    lines = [_event_line(e) for e in events if isinstance(e, (ArmState, Decision))]
+    moves = [line for line in lines if line and "arm moved to coffee's pose: " in line]
+    assert moves, lines
+    assert re.search(
+        r"arm moved to coffee's pose: shoulder \d+°, elbow \d+°, gripper \d+°$", moves[0]
+    )
+    assert not any(line and ("{" in line or "confidence 0.0" in line) for line in lines), lines
+    disarmed = ArmState(1.0, True, False, "maestro", "/dev/pts/3", {})
+    assert _event_line(disarmed) == "[   1.00] arm disarmed"
+    assert (
+        _event_line(Decision(2.0, None, 0.0, "No scene detected")) == "[   2.00] No scene detected"
+    )
+
+
 def test_a_first_start_without_a_model_says_what_to_do():
     result = servant("run", "--headless", "--no-mic", "--no-camera", "--duration", "0.3")
     assert result.returncode == 0, result.stderr
@@ -396,3 +416,29 @@ def test_servant_run_headless_at_a_place_never_taught_keeps_the_arm_still(
     for joint in default_joints():  # armed at home, and never moved from there
         expected = expected_pulse(joint.name, joint.home_angle)
         assert emu.pulse(joint.channel) == pytest.approx(expected, abs=1.0), joint.name
+
+
+def test_train_without_output_writes_the_model_that_servant_run_loads(tmp_path):
+    """Issue 22 item 2: `servant train LIB` alone writes where `servant` and `servant run` look,
+    so a first start after it has a model (and says nothing about "no model yet")."""
+    library = tmp_path / "library"
+    write_demo_library(library, seed=3)
+    assert cli_main(["train", str(library), "--audio-method", "codebook"]) == 0
+    for args in (None, build_parser().parse_args(["run"])):
+        settings = live_settings(args)
+        assert settings.model is not None and Path(settings.model).is_file()
+        assert settings.model == settings.model_path
+
+
+def test_settings_in_the_demo_show_the_emulated_arms_port():
+    """Issue 22 item 11: Settings in the demo showed an empty serial port while the arm was on
+    a pty."""
+    from servant_tui.app import ServantApp
+
+    engine = build_demo_engine(seed=0, realtime=False)
+    try:
+        assert engine.link is not None and engine.link.port
+        settings = ServantApp(engine, mode="demo").settings
+        assert settings.serial_port == engine.link.port and settings.protocol == "maestro"
+    finally:
+        engine.stop()

@@ -105,7 +105,13 @@ def test_servo_move_dry_run_prints_the_bytes(monkeypatch, capsys):
     assert status == 0
     assert "bytes: '#3P1000S166#4P1500S250#5P1000S333\\r'" in out  # arming: home
     assert "bytes: '#3P1017S166\\r'" in out  # 3 degrees, rate-limited: the last step
-    assert out.rstrip().endswith("moved to 3")
+    assert out.rstrip().endswith("moved to shoulder 3°")  # the joint named (issue 22 item 14)
+
+
+def test_servo_move_beyond_the_limit_names_the_joint_it_moved(monkeypatch, capsys):
+    status, out, _ = run(["servo", "move", "--dry-run", "shoulder=400"], "", monkeypatch, capsys)
+    assert status == 0
+    assert "shoulder: 400 is beyond" in out and out.rstrip().endswith("moved to shoulder 90°")
 
 
 def test_servo_query_and_errors(monkeypatch, capsys):
@@ -266,3 +272,34 @@ def test_teach_files_that_cannot_be_saved_are_one_line(option, what, monkeypatch
     status, _, err = run(argv, "coffee\n1\n\n", monkeypatch, capsys)
     assert status == 2 and err.count("\n") == 1
     assert f"cannot save the {what} (No such file or directory)" in err
+
+
+def test_emulate_servo_prints_a_line_per_move_it_receives(tmp_path, monkeypatch, capsys):
+    """Issue 22 item 9: the emulator's terminal says what it was sent, once per move (the link
+    sends a rate-limited move as many small targets)."""
+    emulator = subprocess.Popen(
+        [sys.executable, "-m", "servant_tui", "emulate-servo", "--seconds", "60"],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert emulator.stdout is not None
+        port = re.search(r" on (\S+);", emulator.stdout.readline())
+        assert port is not None
+        status, out, _ = run(
+            ["servo", "move", "--port", port.group(1), "shoulder=40", "elbow=30"],
+            "",
+            monkeypatch,
+            capsys,
+        )
+        assert status == 0, out
+        move = emulator.stdout.readline()  # arming (every joint home), then the pose
+    finally:
+        emulator.terminate()
+        emulator.wait(timeout=30)
+    shoulder, elbow, gripper = default_joints()
+    assert move.strip() == (
+        f"received a move: shoulder 40° (channel {shoulder.channel}, 1222 µs), "
+        f"elbow 30° (channel {elbow.channel}, 1167 µs), "
+        f"gripper 0° (channel {gripper.channel}, 1000 µs)"
+    )

@@ -7,11 +7,12 @@ import io
 from rich.console import Console
 from textual.widgets import DataTable, Input, Static
 
+from servant_core.audio import write_wav
 from servant_tui.app import ServantApp
 from servant_tui.screens.dialogs import Confirm, ScenePrompt
 from servant_tui.screens.library import LibraryScreen, evaluation_table
 from tests.test_tui_live import settle
-from tests.tui_library import write_library
+from tests.tui_library import RATE, noise_recording, write_library
 from tests.tui_replay import ReplayEngine
 
 
@@ -69,3 +70,37 @@ async def test_library_says_when_it_is_empty(tmp_path):
         await pilot.press("l")
         await settle(pilot, lambda: isinstance(app.screen, LibraryScreen))
         assert "empty" in str(app.screen.query_one("#library-status", Static).render())
+
+
+def taught_library(root, samples: int):
+    """A library as teach mode leaves it: each recording one 5 s window."""
+    for i, (scene, centre) in enumerate((("cafe", 500.0), ("street", 2500.0))):
+        for r in range(samples):
+            sound = noise_recording(5.0, centre, seed=10 * i + r)
+            write_wav(root / scene / f"teach-{r}.wav", sound, RATE)
+    return root
+
+
+async def test_evaluate_on_a_taught_library_leaves_one_sample_out(tmp_path):
+    """Issue 22 item 4: `nothing to evaluate: no test window or picture` on every library taught
+    in the app, since each 5 s recording is one window."""
+    app = ServantApp(ReplayEngine(), library_root=taught_library(tmp_path / "library", 2))
+    async with app.run_test(size=(100, 30)) as pilot:
+        await pilot.press("l")
+        await settle(pilot, lambda: isinstance(app.screen, LibraryScreen))
+        screen = app.screen
+        await pilot.press("e")
+        await settle(pilot, lambda: screen.evaluation is not None, tries=3000)
+        assert screen.evaluation["protocol"] == "recording" and screen.evaluation["n_test"] == 4
+        assert "leaving one recording out" in str(screen.query_one("#library-status").render())
+
+
+async def test_evaluate_says_what_to_record_when_one_sample_a_place_is_too_few(tmp_path):
+    app = ServantApp(ReplayEngine(), library_root=taught_library(tmp_path / "library", 1))
+    async with app.run_test(size=(100, 30)) as pilot:
+        await pilot.press("l")
+        await settle(pilot, lambda: isinstance(app.screen, LibraryScreen))
+        await pilot.press("e")
+        status = app.screen.query_one("#library-status")
+        await settle(pilot, lambda: "failed" in str(status.render()), tries=3000)
+        assert "record another sample of cafe, street in teach mode" in str(status.render())

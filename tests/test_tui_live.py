@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
+import pytest
+
 from servant_core.errors import ServantError
-from servant_core.events import ErrorEvent
+from servant_core.events import ArmState, ErrorEvent
 from servant_tui.app import ServantApp
-from servant_tui.screens.dialogs import LabelPrompt
+from servant_tui.screens.dialogs import HelpScreen, LabelPrompt
+from servant_tui.screens.live import fitted, shares
 from servant_tui.widgets.spectrum import Spectrum
 from tests.tui_replay import ReplayEngine, unknown_scene_script
 
@@ -107,3 +111,74 @@ async def test_an_engine_that_cannot_start_is_reported(tmp_path):
         await settle(pilot, lambda: app.live.log_view.lines)
         assert "microphone: no input device" in log_text(app)
         assert app.is_running
+
+
+async def test_the_log_says_the_arm_moved_to_a_scenes_pose(tmp_path):
+    """Issue 22 item 9: a move is a line of the log in words, whole degrees."""
+    moved = ArmState(
+        50.0, True, True, "maestro", "/dev/pts/3", {"shoulder": 10.000942214313854, "elbow": 20.0}
+    )
+    engine = ReplayEngine(script=[dataclasses.replace(moved, pose_of="cafe")])
+    app = ServantApp(engine, library_root=tmp_path)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await settle(pilot, lambda: "moved" in log_text(app))
+        assert "arm moved to cafe's pose: shoulder 10°, elbow 20°" in log_text(app)
+
+
+@pytest.mark.parametrize("size", [(80, 24), (120, 40)])
+async def test_help_scrolls_from_the_keyboard_to_its_last_key(tmp_path, size):
+    """Issue 22 item 8: the key table was cut off at 120x40 and 80x24, and no key scrolled."""
+    app = ServantApp(ReplayEngine(), library_root=tmp_path)
+    async with app.run_test(size=size) as pilot:
+        await pilot.press("question_mark")
+        await settle(pilot, lambda: isinstance(app.screen, HelpScreen))
+        text = app.screen.query_one("#help-text")
+        close = app.screen.query_one("#close")
+        assert close.region.bottom <= size[1], "the Close button is on the screen"
+        assert text.has_focus
+        await pilot.press("end")
+        await pilot.pause()
+        assert text.scroll_y == text.max_scroll_y  # the end of the text, its last key, in view
+        if text.max_scroll_y:
+            await pilot.press("home", "down")
+            await pilot.pause()
+            assert text.scroll_y == 1
+
+
+def test_the_status_line_gives_each_device_what_it_needs_and_keeps_the_problem_whole():
+    """Issue 22 item 12: `servo ✗ no serial port set; choose…` was cut at a third of the line
+    while the other devices left room."""
+    assert shares([20, 30, 70], 118) == [20, 30, 68]
+    assert shares([50, 50, 50], 120) == [40, 40, 40]
+    advice = "no serial port set; choose the arm's port in Settings (s)"
+    assert fitted(advice, 60) == advice
+    assert fitted(advice, 30) == "no serial port set"
+    assert fitted("a-very-long-camera-name-without-clauses", 10) == "a-very-lo…"
+
+
+async def test_secondary_screens_list_help_once_and_their_own_keys_first(tmp_path):
+    """Issue 22 item 12: `? Help` was shown twice in teach mode and Settings, and the app's keys
+    pushed the palette's `^p palette` off an 80-column footer."""
+    app = ServantApp(ReplayEngine(), library_root=tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        for key in ("t", "escape", "s", "escape", "l"):
+            await pilot.press(key)
+            await pilot.pause()
+            if key == "escape":
+                continue
+            # the footer shows one key per action
+            shown = {
+                b.binding.action: b.binding.description
+                for b in app.screen.active_bindings.values()
+                if b.binding.show
+            }
+            assert list(shown.values()).count("Help") == 1 and "Teach" not in shown.values()
+        await pilot.press("s")  # the app's keys still work on a secondary screen
+        await settle(pilot, lambda: type(app.screen).__name__ == "SettingsScreen")
+
+
+async def test_the_log_keeps_a_confidence_and_its_unit_together(tmp_path):
+    app = ServantApp(ReplayEngine(), library_root=tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await settle(pilot, lambda: "detected" in log_text(app))
+        assert "CoffeeScene detected (87.5%)" in log_text(app)

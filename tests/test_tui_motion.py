@@ -92,8 +92,8 @@ async def test_the_motion_pane_traces_the_walk_and_says_what_each_sense_judged(t
         assert "ambient  CoffeeScene   91.0 %" in scene
         assert "leaned   on sound, motion" in scene
         log = log_text(app)
-        assert "motion: street (77.0 %)" in log and "ambient: CoffeeScene (91.0 %)" in log
-        assert "CoffeeScene detected (90.1 %; leaned on sound, motion)" in log
+        assert "motion: street (77.0%)" in log and "ambient: CoffeeScene (91.0%)" in log
+        assert "CoffeeScene detected (90.1%; leaned on sound, motion)" in log
 
         # a place the ambient sense does not know: no confidence in no scene
         engine.emit(SensePrediction(60.0, "ambient", None, 100.0, {}, "%"))

@@ -97,3 +97,34 @@ async def test_the_command_palette_names_each_command_once(tmp_path):
         titles = [command.title for command in app.get_system_commands(app.screen)]
     assert len(titles) == len(set(titles)), titles
     assert "Help" in titles
+
+
+async def test_each_joints_channel_and_pulse_widths_are_set_in_settings(tmp_path, config):
+    """Issue 22 item 13: README step 1 says to choose each joint's channel; Settings had no
+    field for it, nor for the pulse widths its angle limits are sent as."""
+    from servant_tui.screens.settings import SettingsScreen
+
+    app = app_over(tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("s")
+        await settle(pilot, lambda: isinstance(app.screen, SettingsScreen))
+        app.screen.query_one("#elbow-channel", Input).value = "7"
+        app.screen.query_one("#elbow-max_pulse_us", Input).value = "2100"
+        await pilot.press("ctrl+s")
+        await settle(pilot, config.exists)
+    saved = settings_module.load_settings(config).joint("elbow")
+    assert (saved.channel, saved.max_pulse_us) == (7, 2100.0)
+
+
+async def test_a_channel_that_is_not_a_whole_number_is_one_line(tmp_path, config):
+    from servant_tui.screens.settings import SettingsScreen
+
+    app = app_over(tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("s")
+        await settle(pilot, lambda: isinstance(app.screen, SettingsScreen))
+        app.screen.query_one("#elbow-channel", Input).value = "1.5"
+        await pilot.press("ctrl+s")
+        await settle(pilot, lambda: app._notifications)
+        assert "elbow channel: '1.5' is not a whole number" in list(app._notifications)[0].message
+    assert not config.exists()

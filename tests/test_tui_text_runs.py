@@ -18,14 +18,14 @@ TEXT = re.compile(r'<text [^>]*y="([\d.]+)"[^>]*>([^<]*)</text>')
 
 async def test_no_styled_run_starts_with_the_space_before_its_word(tmp_path):
     app = ServantApp(ReplayEngine(), mode="demo", library_root=tmp_path)
-    async with app.run_test(size=(120, 36)) as pilot:
+    async with app.run_test(size=(160, 36)) as pilot:  # the decision on one row of the log
         await settle(pilot, lambda: app.live.scene.decisions)
         await pilot.pause()
         svg = app.export_screenshot()
     lines = "\n".join(read_trimming_runs(svg))
     assert "00:00.0 arm disarmed" in lines
     assert "looking CoffeeScene" in lines
-    assert "CoffeeScene detected (87.5" in lines
+    assert "CoffeeScene detected (87.5%)" in lines
 
 
 def read_trimming_runs(svg: str) -> list[str]:

@@ -9,6 +9,7 @@ import shutil
 import pytest
 from textual.widgets import Input, Static
 
+from servant_core.engine import Engine
 from servant_core.errors import ServantError
 from servant_core.recognisers.base import check_training_scenes
 from servant_tui.app import ServantApp
@@ -213,3 +214,27 @@ async def test_a_relabel_that_cannot_move_the_file_is_reported(tmp_path):
         await pilot.press("enter")
         await settle(pilot, lambda: said(app, "cannot move it to blocked"))
         assert (root / "cafe" / "rec0.wav").exists(), "nothing lost"
+
+
+async def test_teach_retrain_names_the_place_that_lacks_pictures(tmp_path):
+    """Issue 22 item 7: the real engine retrained the sound and said `recognisers retrained on 2
+    scenes` beside `retrain (pictures): … add a second scene folder`. It says what it retrained
+    and, in teach mode's words, which place lacks pictures."""
+    root = write_library(tmp_path / "library")
+    for picture in (root / "street").glob("*.png"):
+        picture.unlink()
+    engine = Engine(model_path=tmp_path / "model.npz")
+    app = ServantApp(engine, library_root=root)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await pilot.press("t")
+        await settle(pilot, lambda: isinstance(app.screen, TeachScreen))
+        app.screen.go("train")
+        await pilot.pause()
+        await pilot.click("#retrain")
+        await settle(pilot, lambda: "retrained on" in status(app, "#train-status"), tries=3000)
+        assert status(app, "#train-status") == "sound retrained on cafe, street"
+        lacking = "pictures: only cafe has any"
+        await settle(pilot, lambda: said(app, lacking))
+        assert said(app, "take pictures of street in teach mode (key t), then retrain")
+        assert "second scene folder" not in log_text(app)
+    assert engine.visual is None and engine.acoustic is not None

@@ -1,8 +1,9 @@
 """The headless command line: `servant <subcommand>`; plain text by default, JSON with `--json`.
 
-Each module listed in SUBCOMMAND_MODULES owns some subcommands and has
-`register(subparsers) -> None`, which adds them with `set_defaults(handler=function)`;
-a handler takes the parsed arguments and returns the exit status.
+Each module named in SUBCOMMANDS owns some subcommands and has `register(subparsers) -> None`,
+which adds their options with `set_defaults(handler=function)`; a handler takes the parsed
+arguments and returns the exit status. A module is imported only when one of its commands is
+parsed: `servant --help` and a light command load none of the heavy libraries the others need.
 The TUI entry point (`servant_tui.main`) builds on this parser; this package never imports Textual.
 """
 
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import importlib
 import json
 import os
@@ -22,12 +24,28 @@ from typing import Any
 
 from servant_core.errors import ServantError
 
-SUBCOMMAND_MODULES = (
-    "servant_core.cli.recognition",
-    "servant_core.cli.arm",
-    "servant_core.cli.live",
-    "servant_core.cli.sensors",
+RECOGNITION, ARM, LIVE, SENSORS = (
+    f"servant_core.cli.{name}" for name in ("recognition", "arm", "live", "sensors")
 )
+# Each command: the module that registers its options, and its line in `servant --help`.
+SUBCOMMANDS = {
+    "train": (RECOGNITION, "train the recognisers on a scene library"),
+    "predict": (RECOGNITION, "recognise a recording and/or pictures with a model"),
+    "eval": (RECOGNITION, "evaluate a method on a scene library"),
+    "table": (RECOGNITION, "the paper's Table I and Table II for a library"),
+    "teach": (ARM, "teach the arm a pose per scene, then ask it (the paper's Fig. 6 session)"),
+    "servo": (ARM, "drive or query the arm's servo controller"),
+    "emulate-servo": (
+        ARM,
+        "run a servo controller emulator on a pseudo-terminal (prints the port)",
+    ),
+    "run": (LIVE, "recognise scenes from the live microphone and camera, and move the arm"),
+    "demo": (LIVE, "the built-in demo scenes (no microphone, camera or arm needed)"),
+    "emulate-sensors": (
+        SENSORS,
+        "run a motion and ambient sensor board emulator on a pseudo-terminal (prints the port)",
+    ),
+}
 
 
 # Options people reach for on the wrong subcommand, and where they are.
@@ -51,11 +69,38 @@ class DefaultsFormatter(argparse.HelpFormatter):
 
 
 class ServantParser(argparse.ArgumentParser):
-    """Every (sub)command's `--help` shows the defaults; a misplaced option gets a hint."""
+    """Every (sub)command's `--help` shows the defaults; a misplaced option gets a hint.
+
+    A command's parser starts empty and is filled by its module's `register` the first time it
+    parses (`fill`), or at once with `build_parser(lazy=False)`."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault("formatter_class", DefaultsFormatter)
+        self.filled_by: Callable[[], None] | None = kwargs.pop("filled_by", None)
         super().__init__(*args, **kwargs)
+
+    def fill(self) -> None:
+        filled_by, self.filled_by = self.filled_by, None
+        if filled_by is not None:
+            filled_by()
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        """An option no (sub)command knows is refused by the subcommand it was typed after, so
+        that its line points to that command's `--help` (argparse leaves it to `servant`)."""
+        self.fill()
+        parsed, extras = super().parse_known_args(args, namespace)
+        if extras and self._subcommand_of(parsed) is not self:
+            self._subcommand_of(parsed).error(f"unrecognized arguments: {' '.join(extras)}")
+        return parsed, extras
+
+    def _subcommand_of(self, parsed: argparse.Namespace) -> argparse.ArgumentParser:
+        """The innermost (sub)command parser that `parsed` went through (`servant eval audio`)."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                chosen = action.choices.get(getattr(parsed, action.dest, None) or "")
+                if isinstance(chosen, ServantParser):
+                    return chosen._subcommand_of(parsed)
+        return self
 
     def error(self, message: str) -> Any:
         """One line, as for every other error (argparse would print the usage first)."""
@@ -70,15 +115,47 @@ class ServantParser(argparse.ArgumentParser):
         self.exit(2, f"servant: error: {where}{one_line(text)}\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+class _Listed:
+    """What a module's `register` is handed as `subparsers`: `add_parser(name, ...)` returns the
+    command's parser already listed (help from SUBCOMMANDS), with its description set."""
+
+    def __init__(self, listed: dict[str, ServantParser]) -> None:
+        self.listed = listed
+
+    def add_parser(self, name: str, **kwargs: Any) -> ServantParser:
+        parser = self.listed[name]
+        if "description" in kwargs:
+            parser.description = kwargs["description"]
+        return parser
+
+
+def build_parser(lazy: bool = True) -> argparse.ArgumentParser:
+    """The `servant` parser; each command's options are registered when it is first parsed
+    (`lazy`), or all at once (for a test that walks every option)."""
     parser = ServantParser(
         prog="servant",
         description="Scene recognition from sound and colour, driving a wearable arm. "
         "With no subcommand, opens the terminal application on the live devices.",
     )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in SUBCOMMAND_MODULES:
-        importlib.import_module(name).register(subparsers)
+    listed: dict[str, ServantParser] = {}
+    registered: set[str] = set()
+
+    def register(module: str) -> None:
+        if module not in registered:
+            registered.add(module)
+            importlib.import_module(module).register(_Listed(listed))
+            for name, (owner, _) in SUBCOMMANDS.items():
+                if owner == module:
+                    listed[name].filled_by = None
+
+    for name, (module, help_line) in SUBCOMMANDS.items():
+        listed[name] = subparsers.add_parser(
+            name, help=help_line, filled_by=functools.partial(register, module)
+        )
+    if not lazy:
+        for command in listed.values():
+            command.fill()
     return parser
 
 

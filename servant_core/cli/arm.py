@@ -6,6 +6,7 @@ import argparse
 import math
 import re
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -22,9 +23,10 @@ from servant_core.actions.records import (
 from servant_core.cli import emit, serve_until_stopped, terminal_text
 from servant_core.cli.options import bounded_int, finite_float
 from servant_core.errors import ServantError
+from servant_core.event_text import pose_text
 from servant_core.servo import PROTOCOLS
-from servant_core.servo.calibration import clamp_pose
-from servant_core.servo.emulator import start_emulator
+from servant_core.servo.calibration import clamp_pose, pulse_to_angle
+from servant_core.servo.emulator import ServoEmulator, start_emulator
 from servant_core.servo.link import MAX_RECORD_S, MAX_TIMEOUT_S, ManualClock, ServoLink, seconds
 from servant_core.settings import Joint, Settings, load_settings
 
@@ -36,7 +38,6 @@ MAX_EMULATE_S = 7 * 24 * 3600.0
 def register(subparsers: argparse._SubParsersAction) -> None:
     teach = subparsers.add_parser(
         "teach",
-        help="teach the arm a pose per scene, then ask it (the paper's Fig. 6 session)",
         description="A line-oriented session on stdin/stdout. Training phase: a scene label, then "
         "the action (an angle for --joint, `joint=angle ...`, or `record [seconds]` to read the "
         "pose the arm is guided into); an empty label ends it. The learner trains, printing its "
@@ -62,7 +63,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     teach.set_defaults(handler=run_teach)
 
-    servo = subparsers.add_parser("servo", help="drive or query the arm's servo controller")
+    servo = subparsers.add_parser("servo")
     commands = servo.add_subparsers(dest="servo_command", metavar="SERVO_COMMAND", required=True)
     ports = commands.add_parser("list-ports", help="list the serial ports of this machine")
     ports.add_argument("--json", action="store_true", help="print JSON")
@@ -78,10 +79,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _link_options(query)
     query.set_defaults(handler=run_query)
 
-    emulate = subparsers.add_parser(
-        "emulate-servo",
-        help="run a servo controller emulator on a pseudo-terminal (prints the port)",
-    )
+    emulate = subparsers.add_parser("emulate-servo")
     emulate.add_argument("--protocol", choices=sorted(PROTOCOLS), default="maestro")
     emulate.add_argument("--link", help="also make this path a symlink to the port (a stable name)")
     emulate.add_argument(
@@ -201,7 +199,7 @@ def run_move(args: argparse.Namespace) -> int:
                 "controller": link.controller,
                 "port": link.port,
             },
-            f"moved to {_angles(reached)}",
+            f"moved to {pose_text(reached)}",
         )
     return 0
 
@@ -220,12 +218,61 @@ def run_query(args: argparse.Namespace) -> int:
 
 def run_emulate(args: argparse.Namespace) -> int:
     emulator, port = start_emulator(args.protocol, link=args.link)
+    try:
+        joints = load_settings().joints
+    except ServantError:  # the user's settings only name the channels here; they may be broken
+        joints = Settings().joints
+    stop = threading.Event()
+    watcher = threading.Thread(
+        target=_say_moves, args=(emulator, joints, stop), name="emulator-moves", daemon=True
+    )
+    watcher.start()
+
+    def stop_serving() -> None:
+        stop.set()
+        watcher.join()
+        emulator.stop()
+
     return serve_until_stopped(
-        emulator.stop,
+        stop_serving,
         f"Emulating a {PROTOCOLS[args.protocol].title} on {port}; connect with "
         f"`servant servo query --port {port} --protocol {args.protocol}`. Ctrl-C stops.",
         args.seconds,
     )
+
+
+MOVE_QUIET_S = 0.3  # a rate-limited move is many small targets; one line once they stop coming
+
+
+def _say_moves(emulator: ServoEmulator, joints: list[Joint], stop: threading.Event) -> None:
+    """One line per move the emulator receives: each channel's last target, once the targets
+    have stopped coming for `MOVE_QUIET_S` (the link steps a move at 50 Hz)."""
+    newest = -math.inf
+    pending: dict[int, float] = {}
+    while not stop.wait(0.1):
+        for t, channel, value in emulator.history():
+            if t > newest:
+                newest, pending[channel] = t, value
+        if pending and emulator.clock() - newest >= MOVE_QUIET_S:
+            print(f"received a move: {_targets_text(emulator, joints, pending)}", flush=True)
+            pending = {}
+
+
+def _targets_text(emulator: ServoEmulator, joints: list[Joint], targets: dict[int, float]) -> str:
+    """`shoulder 40° (channel 0, 1500 µs)`: the joint of the settings on that channel, if any.
+    StandardFirmata takes an angle below 544 and a pulse width from there."""
+    by_channel = {j.channel: j for j in joints}
+    words = []
+    for channel, value in sorted(targets.items()):
+        joint = by_channel.get(channel)
+        if emulator.protocol == "firmata" and value < 544:
+            words.append(f"channel {channel} {value:.0f}° (servo angle)")
+        elif joint is None:
+            words.append(f"channel {channel} {value:.0f} µs")
+        else:
+            angle = pulse_to_angle(joint, value)
+            words.append(f"{joint.name} {round(angle):d}° (channel {channel}, {value:.0f} µs)")
+    return ", ".join(words)
 
 
 # -- teach ---------------------------------------------------------------------------------

@@ -20,7 +20,7 @@ from servant_core.cli import terminal_text
 from servant_core.cli.options import finite_float, sample_rate
 from servant_core.engine import Engine, LiveSettings, build_demo_engine, build_live_engine
 from servant_core.errors import ServantError
-from servant_core.event_text import confidence_text, place
+from servant_core.event_text import arm_text, confidence_text, place
 from servant_core.events import (
     AcousticPrediction,
     ArmState,
@@ -47,12 +47,11 @@ in the demo goes to a temporary folder, deleted when it ends."""
 
 
 def register(subparsers: Any) -> None:
-    from servant_core.fusion import POLICIES
+    from servant_core.fusion import DEFAULT_POLICY, POLICIES
     from servant_core.settings import PROTOCOLS
 
     run = subparsers.add_parser(
         "run",
-        help="recognise scenes from the live microphone and camera, and move the arm",
         description=RUN_DESCRIPTION,
     )
     run.add_argument(
@@ -96,7 +95,7 @@ def register(subparsers: Any) -> None:
     run.add_argument(
         "--policy",
         choices=sorted(POLICIES),
-        default="parallel",
+        default=DEFAULT_POLICY,
         help="fusion: `sequential` is the paper's 30 s / 20 s rule; `learned` is a small neural "
         "net over every sense (trained with the model; without one it acts as `parallel`)",
     )
@@ -106,7 +105,6 @@ def register(subparsers: Any) -> None:
 
     demo = subparsers.add_parser(
         "demo",
-        help="the built-in demo scenes (no microphone, camera or arm needed)",
         description=DEMO_DESCRIPTION,
     )
     demo.add_argument("--seed", type=int, default=0, help="seed of the synthesised scenes")
@@ -263,6 +261,8 @@ def _event_line(event: Event) -> str | None:
         confidence = confidence_text(event.confidence, event.confidence_unit)
         if isinstance(event, Decision):
             leaned = f"  leaned on {', '.join(event.leaned_on)}" if event.leaned_on else ""
+            if event.scene is None:  # no scene, no confidence to show
+                return f"{at} {event.line}{leaned}"
             return f"{at} {event.line}  confidence {confidence}{leaned}"
         verb, sense = (
             ("heard", "acoustic") if isinstance(event, AcousticPrediction) else ("saw", "visual")
@@ -284,7 +284,7 @@ def _event_line(event: Event) -> str | None:
     if isinstance(event, Notice):
         return f"{at} note: {event.message}"
     if isinstance(event, ArmState):
-        return f"{at} arm {'armed' if event.armed else 'disarmed'} {event.angles}"
+        return f"{at} {arm_text(event)}"
     return None
 
 

@@ -34,7 +34,7 @@ from servant_core.evaluate import (
 )
 from servant_core.event_text import confidence_text, place
 from servant_core.features.rows import checked_rows, usable_rows
-from servant_core.fusion import POLICIES, FusionConfig, LearnedFusion
+from servant_core.fusion import DEFAULT_POLICY, POLICIES, FusionConfig, LearnedFusion
 from servant_core.fusion.elsewhere import place_probability
 from servant_core.library import SceneLibrary, featurize_recordings, read_picture, read_pictures
 from servant_core.modelfile import check_model_output, load_model_and_fusion, save_model
@@ -51,14 +51,18 @@ from servant_core.recognisers import (
 from servant_core.recognisers.background import kept_out
 from servant_core.recognisers.base import knows_elsewhere, open_predict, open_probabilities
 from servant_core.senses import ROLE_SENSE, SAMPLE_SENSES
-from servant_core.storage import data_dir
+from servant_core.storage import default_model_file
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    train = subparsers.add_parser("train", help="train the recognisers on a scene library")
+    train = subparsers.add_parser("train")
     train.add_argument("root", type=Path, help="scene library: ROOT/<scene>/<recordings, pictures>")
     train.add_argument(
-        "-o", "--output", type=Path, help="model file (default: models/model.npz in the data dir)"
+        "-o",
+        "--output",
+        type=Path,
+        help="model file (default: the data dir's model.npz, which `servant` and `servant run` "
+        "load at start)",
     )
     _method_options(train)
     _audio_options(train)
@@ -76,9 +80,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _json_option(train)
     train.set_defaults(handler=cmd_train)
 
-    predict = subparsers.add_parser(
-        "predict", help="recognise a recording and/or pictures with a model"
-    )
+    predict = subparsers.add_parser("predict")
     predict.add_argument("model", type=Path, help="model file from `servant train`")
     predict.add_argument("--audio", type=Path, help="a recording: each window is recognised")
     predict.add_argument("--image", type=Path, nargs="+", default=[], help="pictures, in order")
@@ -86,7 +88,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _json_option(predict)
     predict.set_defaults(handler=cmd_predict)
 
-    evaluate = subparsers.add_parser("eval", help="evaluate a method on a scene library")
+    evaluate = subparsers.add_parser("eval")
     senses = evaluate.add_subparsers(dest="sense", metavar="SENSE", required=True)
     audio = senses.add_parser(
         "audio", help="acoustic recognition: temporal, recording, source or fewshot protocol"
@@ -120,7 +122,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         f"(default: {','.join(map(str, DEFAULT_SHOTS))})",
     )
     audio.add_argument(
-        "--method", choices=sorted(ACOUSTIC_METHODS), default="paper", help="acoustic method"
+        "--method",
+        choices=sorted(ACOUSTIC_METHODS),
+        default=FRESH_METHODS["audio"],
+        help="acoustic method (paper: the paper's FFT K-Means)",
     )
     audio.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
     audio.add_argument(
@@ -146,7 +151,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="without --test: fraction of each scene's files (by name) that train",
     )
     image.add_argument(
-        "--method", choices=sorted(VISUAL_METHODS), default="paper", help="visual method"
+        "--method",
+        choices=sorted(VISUAL_METHODS),
+        default=FRESH_METHODS["image"],
+        help="visual method (paper: the paper's dominant colours)",
     )
     image.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
     _seeds_option(image)
@@ -166,7 +174,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _json_option(fusion)
     fusion.set_defaults(handler=cmd_eval_fusion)
 
-    table = subparsers.add_parser("table", help="the paper's Table I and Table II for a library")
+    table = subparsers.add_parser("table")
     table.add_argument("library", type=Path, help="scene library with recordings and pictures")
     table.add_argument("--test", type=Path, help="take the test recording and picture from here")
     table.add_argument(
@@ -239,7 +247,7 @@ def _fusion_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--policy",
         choices=sorted(POLICIES),
-        default="sequential",
+        default=DEFAULT_POLICY,
         help="sequential: the paper's (hear, then look); parallel: both senses at once; "
         "learned: a small neural net over every sense's probabilities (parallel without one)",
     )
@@ -361,7 +369,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             if fusion is not None
             else {"fallback": reason}
         )
-    output = args.output or data_dir() / "models" / "model.npz"
+    output = args.output or default_model_file()
     save_model(output, recognisers, fusion)
     summary["model"] = str(output)
     lines = [f"model written to {output}"]
@@ -426,10 +434,21 @@ def cmd_predict(args: argparse.Namespace) -> int:
         unit = audio.confidence_unit
         judged = list(zip(np.flatnonzero(usable).tolist(), scenes, confidences, strict=True))
         result["acoustic"] = [
-            {"window": i, "scene": str(s), "confidence": float(c), "confidence_unit": unit}
+            {
+                "window": i,
+                "start_s": i * seconds,
+                "end_s": (i + 1) * seconds,
+                "scene": str(s),
+                "confidence": float(c),
+                "confidence_unit": unit,
+            }
             for i, s, c in judged
         ]
-        lines += [f"Acoustic window {i}: {_judged(str(s), float(c), unit)}" for i, s, c in judged]
+        lines += [
+            f"Acoustic window {i} ({i * seconds:g}-{(i + 1) * seconds:g} s): "
+            + _judged(str(s), float(c), unit)
+            for i, s, c in judged
+        ]
         first_acoustic = (
             str(scenes[0]),
             float(confidences[0]),

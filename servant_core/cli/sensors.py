@@ -14,8 +14,6 @@ MAX_EMULATE_S = 7 * 24 * 3600.0
 def register(subparsers: argparse._SubParsersAction) -> None:
     emulate = subparsers.add_parser(
         "emulate-sensors",
-        help="run a motion and ambient sensor board emulator on a pseudo-terminal (prints the "
-        "port)",
         description="Streams the lines of docs/sensor_board.ino (docs/sensors.md): synthesised "
         "motion and ambient values of the scene a script names, over and over.",
     )

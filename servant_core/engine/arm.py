@@ -31,6 +31,7 @@ class ArmControl:
         self.bus = bus
         self.reopen_seconds = reopen_seconds
         self.link: Any = None
+        self.why_none = "servo: no arm attached; connect one with `servant servo` first"
         self.pose_for: PoseFor | None = None
         self._spec: tuple[Any, ...] | None = None  # (port, protocol, joints) of `connect`
         self._pool: ThreadPoolExecutor | None = None
@@ -55,6 +56,7 @@ class ArmControl:
         """Attach a link, or None to detach it (`why_none` says why). Not closed by the engine."""
         self.link = link
         if link is None:
+            self.why_none = why_none
             self.bus.report("servo", False, why_none)
         else:
             name = getattr(link, "port", None) or "link"
@@ -101,11 +103,26 @@ class ArmControl:
     # --- arming -------------------------------------------------------------------------------
 
     def arm(self) -> None:
-        """Allow the arm to move; ServantError if no arm is attached."""
+        """Allow the arm to move; ServantError if no arm is attached, saying why there is none
+        (no such serial port, no port set, a controller that does not answer)."""
         if self.link is None:
-            raise ServantError("servo: no arm attached; connect one with `servant servo` first")
+            raise ServantError(self.why_none)
         self.link.arm()
         self.emit_state()
+
+    def read_pose(self) -> dict[str, float]:
+        """Where the controller says each joint is, armed or not (a wearer guides the arm by hand
+        disarmed); ServantError if there is no arm or it reports no joint yet."""
+        link = self.link
+        if link is None:
+            raise ServantError(f"{self.why_none}; type the angles instead")
+        angles = dict(link.read_positions())
+        if not angles:
+            raise ServantError(
+                "arm: the controller reports no joint's position yet; guide the arm, or type "
+                "the angles"
+            )
+        return angles
 
     def disarm(self) -> None:
         """Forbid the arm to move; does nothing when no arm is attached (safe to call always)."""
@@ -113,11 +130,12 @@ class ArmControl:
             self.link.disarm()
             self.emit_state()
 
-    def emit_state(self) -> None:
+    def emit_state(self, pose_of: str | None = None) -> None:
+        """The link's state; `pose_of` names the scene whose pose the arm has just taken."""
         state = self.link.status() if self.link is not None else None
         if isinstance(state, ArmState):
             # the link stamps its own clock; events carry the engine's
-            self.bus.emit(dataclasses.replace(state, t=self.bus.clock()))
+            self.bus.emit(dataclasses.replace(state, t=self.bus.clock(), pose_of=pose_of))
 
     # --- acting -------------------------------------------------------------------------------
 
@@ -161,9 +179,9 @@ class ArmControl:
         if pose is None:
             return
         if pool is None:  # run_until: no thread pool, send on this thread
-            self._move(link, dict(pose))
+            self._move(link, scene, dict(pose))
         else:
-            pool.submit(self._move, link, dict(pose))
+            pool.submit(self._move, link, scene, dict(pose))
 
     def check(self, t: float) -> None:
         """Every `reopen_seconds`, ask an armed arm where it is (on the arm's thread): a
@@ -182,13 +200,15 @@ class ArmControl:
             self.bus.report("servo", False, str(error))
             self.emit_state()
 
-    def _move(self, link: Any, pose: dict[str, float]) -> None:
+    def _move(self, link: Any, scene: str, pose: dict[str, float]) -> None:
         # On its own thread: a rate-limited move takes seconds and must not hold up the senses.
+        moved = False
         try:
             if link.armed:
                 link.move_to(pose)
+                moved = link.armed and link.at_goal  # not disarmed nor cut short on the way
         except ServantError as error:
             self.bus.report("servo", False, str(error))
         except Exception as exc:
             self.bus.report("servo", False, f"servo: move failed ({type(exc).__name__}: {exc})")
-        self.emit_state()
+        self.emit_state(scene if moved else None)

@@ -43,7 +43,14 @@ from servant_core.engine import learning
 from servant_core.engine.arm import ArmControl, PoseFor
 from servant_core.engine.bus import EventBus, Subscriber
 from servant_core.engine.learning import Kept, Unknowns
-from servant_core.engine.loop import SPECTRUM_FPS, SPECTRUM_SIZE, Feeling, Hearing, Sight
+from servant_core.engine.loop import (
+    SPECTRUM_FPS,
+    SPECTRUM_SIZE,
+    DeviceMakers,
+    Feeling,
+    Hearing,
+    Sight,
+)
 from servant_core.errors import ServantError
 from servant_core.events import (
     AcousticPrediction,
@@ -216,6 +223,9 @@ class Engine:
         # front end starts from these, not from the file: `servant run --port P` keeps P)
         self.user_settings: Any = None
         self._sensor_port_told: str | None = None
+        # how Settings' camera and microphone are opened while running (None: they stay as built)
+        self.device_makers: DeviceMakers | None = None
+        self._next_audio: AudioSource | None = None  # swapped in on the sense thread
 
     # --- subscribers and status -------------------------------------------------------------
 
@@ -347,6 +357,10 @@ class Engine:
         """One turn: take an audio block if one comes within `timeout`, the readings of the sample
         senses, then let fusion look. Without working audio, the first sample sense waits."""
         hearing = self._hearing
+        with self._lock:
+            next_audio, self._next_audio = self._next_audio, None
+        if next_audio is not None and hearing is not None:
+            hearing.replace(next_audio)
         waited = False
         if hearing is not None and hearing.ok:
             if not hearing.listen(timeout):
@@ -606,6 +620,11 @@ class Engine:
         """Forbid the arm to move; does nothing when no arm is attached (safe to call always)."""
         self._arm.disarm()
 
+    def read_arm_pose(self) -> dict[str, float]:
+        """The arm's joints' angles as its controller reports them, armed or not (teach mode's
+        "Use the arm's pose"); ServantError when there is no arm or it says nothing."""
+        return self._arm.read_pose()
+
     def apply_settings(self, settings: Any) -> None:
         """Use the user's settings (`servant_core.settings.Settings`) from now on: the fusion
         windows (when they changed, the current window starts afresh), the confidence threshold,
@@ -626,6 +645,7 @@ class Engine:
         self._emit(state)
         if self._arm.connected_here:
             self.connect_arm(settings.serial_port, settings.protocol, settings.joints)
+        self._use_devices(settings)
         board = getattr(settings, "sensor_port", None)
         if board != self.sensor_port and board != self._sensor_port_told:
             self._sensor_port_told = board
@@ -636,6 +656,20 @@ class Engine:
                     "motion and ambient senses open with the engine)",
                 )
             )
+
+    def _use_devices(self, settings: Any) -> None:
+        """A camera or microphone changed in Settings is opened now, not at the next start.
+        Compared with the settings the engine last took, so that one given on the command line
+        (`servant run --camera F`) stays until the user changes that field."""
+        before, self.user_settings = self.user_settings, settings
+        makers = self.device_makers
+        if before is None or makers is None:
+            return
+        if settings.camera != before.camera and self._sight is not None:
+            self._sight.replace(makers.camera(settings.camera))
+        if settings.audio_device != before.audio_device and self._hearing is not None:
+            with self._lock:
+                self._next_audio = makers.microphone(settings.audio_device)
 
     # --- what the front end asks for ----------------------------------------------------------
 
@@ -696,7 +730,7 @@ class Engine:
         self,
         library: SceneLibrary | str | Path,
         on_progress: Callable[[int, int], None] | None = None,
-    ) -> None:
+    ) -> list[str]:
         """Refit copies of the recognisers on a scene library (sound, pictures, and each sample
         sense with logs in it), then swap them in (the senses keep running on the old ones
         meanwhile). A sense without a recogniser gets a new one of its
@@ -704,7 +738,7 @@ class Engine:
         be trained (e.g. pictures of one scene only) is reported and keeps its recogniser while
         the other is retrained; if neither can be, the first reason is raised. `on_progress(done,
         total)` is called after each file read, recordings, pictures, then logs, on this
-        thread."""
+        thread. Returns the senses retrained ("audio", "image", …)."""
         if not isinstance(library, SceneLibrary):
             library = SceneLibrary.scan(library)
         with self._update_lock:
@@ -721,9 +755,10 @@ class Engine:
             if not fitted:
                 if failures:
                     raise failures[0]
-                return
+                return []
             for failure in failures:
                 self._error(str(failure))
+            senses = list(fitted)
             with self._lock:
                 if "audio" in fitted:
                     self.acoustic = fitted.pop("audio")
@@ -733,6 +768,7 @@ class Engine:
                 self.retrain_needed = False
             self._relearn_fusion(library)
             self._save_models()
+        return senses
 
     def _relearn_fusion(self, library: SceneLibrary) -> None:
         """The learned policy's net, taught again on the retrained recognisers (called under

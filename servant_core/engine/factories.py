@@ -16,8 +16,10 @@ from typing import Any
 from servant_core.capture.source import ManualClock, MonotonicClock
 from servant_core.engine.arm import Pose, PoseFor
 from servant_core.engine.core import Engine, fusion_config
+from servant_core.engine.loop import DeviceMakers
 from servant_core.errors import ServantError
 from servant_core.fusion import (
+    DEFAULT_POLICY,
     POLICIES,
     FusionConfig,
     FusionNet,
@@ -78,7 +80,7 @@ def build_demo_engine(
     audio = demo_audio(seed, realtime=realtime, clock=clock if not realtime else None)
     why = None
     if fusion is None:
-        policy = policy or ("sequential" if paper else "parallel")
+        policy = policy or ("sequential" if paper else DEFAULT_POLICY)
         net, why = None, None
         if policy == "learned":
             net, why = demo_fusion_net(seed, {"audio": acoustic, "image": visual, **sensing})
@@ -107,6 +109,10 @@ def build_demo_engine(
         engine.add_cleanup(link.close)  # runs first: the link closes before its emulator
         engine.set_arm(link)
         engine.set_action_learner(pose_for_taught(demo_learner()))
+        from servant_core.settings import Settings
+
+        # what Settings shows in the demo: the emulated arm's port, not the empty default
+        engine.user_settings = Settings(serial_port=link.port, protocol=link.protocol.name)
     return engine
 
 
@@ -183,7 +189,7 @@ class LiveSettings:
     camera: int | str | None = 0
     library_root: str | Path | None = None
     user: Any = None
-    policy: str = "parallel"
+    policy: str = DEFAULT_POLICY
     learner: str | Path | None = None
     sensors: Mapping[str, str] = dataclasses.field(default_factory=dict)
 
@@ -227,6 +233,11 @@ def build_live_engine(
         )
     engine.sensor_port = user.sensor_port
     engine.user_settings = settings.user
+    rate = settings.rate
+    engine.device_makers = DeviceMakers(
+        camera=lambda spec: Camera(spec if spec is not None else 0),
+        microphone=lambda device: Microphone(device, rate),
+    )
     engine.connect_arm(user.serial_port, user.protocol, user.joints)
     learner_file = Path(settings.learner or default_learner_path())
     if settings.learner is not None or learner_file.is_file():

@@ -115,9 +115,15 @@ def retrained(
     for sense, files in parts:
         if not files:
             continue
-        model = copy_or_fresh(current.get(sense), sense, fresh_methods[sense])
         progress = progress_part(on_progress, offset, total)
         offset += len(files)
+        lacking = too_few_scenes(sense, files, library)
+        if lacking is not None:
+            failures.append(lacking)
+            if progress is not None:
+                progress(len(files), len(files))
+            continue
+        model = copy_or_fresh(current.get(sense), sense, fresh_methods[sense])
         try:
             if sense == "audio":
                 new = refit_audio(library, model, window_seconds, on_error, progress)
@@ -127,7 +133,7 @@ def retrained(
                 stream = SAMPLE_SENSES[sense].stream or sense
                 new = refit_samples(files, stream, model, window_seconds, on_error, progress)
         except ServantError as error:
-            failures.append(ServantError(f"retrain ({RETRAIN_WORDS.get(sense, sense)}): {error}"))
+            failures.append(ServantError(f"retrain ({sense_words(sense)}): {error}"))
             continue
         if new is not None:
             fitted[sense] = new
@@ -135,6 +141,51 @@ def retrained(
 
 
 RETRAIN_WORDS = {"audio": "sound", "image": "pictures"}
+# What teach mode's buttons do, for a sense that lacks a place (sample senses record with sound).
+TEACH_WORDS = {"audio": "record sound at", "image": "take pictures of"}
+
+
+def sense_words(sense: str) -> str:
+    return RETRAIN_WORDS.get(sense, SENSES[sense].label if sense in SENSES else sense)
+
+
+def too_few_scenes(sense: str, files: Sequence[Any], library: SceneLibrary) -> ServantError | None:
+    """Why `files` (one sense's) cannot train it, in teach mode's words, naming the places that
+    lack them ("take pictures of street"); None when two places or more have some."""
+    have = sorted({f.scene for f in files})
+    if len(have) >= 2:
+        return None
+    lacking = [scene for scene in library.scenes if scene not in have]
+    words = sense_words(sense)
+    fix = (
+        f"{TEACH_WORDS.get(sense, f'record {words} at')} {', '.join(lacking)}"
+        if lacking
+        else "teach a second place"
+    )
+    return ServantError(
+        f"{words}: only {have[0]} has any, nothing to tell it apart from; {fix} in teach mode "
+        "(key t), then retrain"
+    )
+
+
+def retrained_text(senses: Sequence[str] | None, library: SceneLibrary) -> str:
+    """What a retrain retrained, for the log: "sound and pictures retrained on cafe, street";
+    `senses` None (an engine that does not say): every sense with files in the library."""
+    by_sense: dict[str, Sequence[Any]] = {
+        "audio": library.recordings,
+        "image": library.pictures,
+        **library.samples,
+    }
+    if senses is None:
+        senses = [sense for sense, files in by_sense.items() if files]
+    groups: dict[tuple[str, ...], list[str]] = {}
+    for sense in senses:
+        scenes = tuple(sorted({f.scene for f in by_sense.get(sense, [])}))
+        groups.setdefault(scenes, []).append(sense_words(sense))
+    if not groups:
+        return "nothing retrained"
+    said = [f"{' and '.join(words)} retrained on {', '.join(at)}" for at, words in groups.items()]
+    return "; ".join(said)
 
 
 def refit_audio(

@@ -12,6 +12,7 @@ from __future__ import annotations
 import threading
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -36,6 +37,15 @@ def spectrum_db(samples: np.ndarray, rate: int) -> tuple[np.ndarray, np.ndarray]
     hann = np.hanning(n)
     magnitude = np.abs(np.fft.rfft(samples * hann)) * 2.0 / hann.sum()
     return np.fft.rfftfreq(n, 1.0 / rate), 20.0 * np.log10(np.maximum(magnitude, 1e-6))
+
+
+@dataclass(frozen=True)
+class DeviceMakers:
+    """How a live engine opens the camera or microphone the Settings name (a device value as
+    the settings hold it: an index, a name, a path, or None for the default)."""
+
+    camera: Callable[[int | str | None], FrameSource]
+    microphone: Callable[[int | str | None], AudioSource]
 
 
 class Hearing:
@@ -94,6 +104,12 @@ class Hearing:
     def close(self) -> None:
         self.source.close()
         self.ok = False
+
+    def replace(self, source: AudioSource) -> None:
+        """Listen to `source` from now on (another microphone chosen in Settings)."""
+        self.close()
+        self.source = source
+        self.open()
 
     def reopen_if_due(self, t: float) -> None:
         if not self.ok and t >= self._retry_at:
@@ -175,6 +191,13 @@ class Sight:
         with self._lock:
             self.source.close()
             self.ok = False
+
+    def replace(self, source: FrameSource) -> None:
+        """Look through `source` from now on (another camera chosen in Settings)."""
+        with self._lock:
+            self.source.close()
+            self.source = source
+            self._open()
 
     def grab(self, t: float) -> np.ndarray | None:
         """A frame, reopening the camera if it failed a while ago; None if there is none."""

@@ -35,7 +35,12 @@ POLICIES: dict[str, type] = {
     "learned": LearnedFusion,
 }
 
+# What `servant run`, `predict`, `eval fusion` and the app fuse with unless told otherwise (the
+# paper's own rule, `sequential`, is what `--paper` and `table` reproduce).
+DEFAULT_POLICY = "parallel"
+
 __all__ = [
+    "DEFAULT_POLICY",
     "POLICIES",
     "FusionConfig",
     "FusionNet",

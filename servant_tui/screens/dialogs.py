@@ -5,7 +5,7 @@ from __future__ import annotations
 from textual import on
 from textual.app import ComposeResult
 from textual.binding import Binding
-from textual.containers import Horizontal, Vertical
+from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.screen import ModalScreen
 from textual.suggester import SuggestFromList
 from textual.widgets import Button, Input, Label, Markdown
@@ -44,8 +44,13 @@ class HelpScreen(ModalScreen[None]):
 
     def compose(self) -> ComposeResult:
         with Vertical(id="help", classes="dialog"):
-            yield Markdown(HELP)
+            # focused, so that up/down, page up/down, home and end scroll it from the keyboard
+            with VerticalScroll(id="help-text"):
+                yield Markdown(HELP)
             yield Button("Close", id="close", variant="primary")
+
+    def on_mount(self) -> None:
+        self.query_one("#help-text").focus()
 
     @on(Button.Pressed, "#close")
     def close(self) -> None:

@@ -14,9 +14,11 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Header, Static
 
+from servant_core.engine.learning import retrained_text
 from servant_core.errors import ServantError
-from servant_core.evaluate import evaluate_audio
+from servant_core.evaluate import TAUGHT, evaluate_audio
 from servant_core.library import SceneLibrary
+from servant_core.recognisers import FRESH_METHODS
 from servant_tui.messages import EvaluationDone, RetrainDone
 from servant_tui.screens.dialogs import Confirm, ScenePrompt
 from servant_tui.screens.secondary import HELP_AND_QUIT, ReportsWorkerErrors, with_progress
@@ -33,6 +35,12 @@ def free_path(folder: Path, name: str) -> Path:
         candidate = folder / f"{stem}-{n}{suffix}"
         n += 1
     return candidate
+
+
+PROTOCOL_WORDS = {
+    "temporal": "each recording's first 60 % teaching, the rest testing",
+    "recording": "leaving one recording out at a time",
+}
 
 
 def evaluation_table(result: dict) -> Table:
@@ -196,13 +204,11 @@ class LibraryScreen(ReportsWorkerErrors, Screen[None]):
     @work(thread=True, exclusive=True, group="retrain", exit_on_error=False)
     def retrain(self, on_progress: OnProgress) -> None:
         library = SceneLibrary.scan(self.root)
-        with_progress(self.app.engine.retrain, library, on_progress)
+        senses = with_progress(self.app.engine.retrain, library, on_progress)
         saved = getattr(self.app.engine, "model_path", None)
         self.post_message(
             RetrainDone(
-                f"retrained on {len(library.scenes)} scenes, {len(library.recordings)} "
-                f"recordings, {len(library.pictures)} pictures"
-                + (f"; model saved to {saved}" if saved else "")
+                retrained_text(senses, library) + (f"; model saved to {saved}" if saved else "")
             )
         )
 
@@ -213,14 +219,21 @@ class LibraryScreen(ReportsWorkerErrors, Screen[None]):
         self.app.log_line(None, message.summary)
 
     def action_evaluate(self) -> None:
-        self.status("evaluating (temporal protocol)…")
+        self.status("evaluating the sound…")
         self.evaluate(self.query_one(WorkProgress).begin())
 
     @work(thread=True, exclusive=True, group="evaluate", exit_on_error=False)
     def evaluate(self, on_progress: OnProgress) -> None:
         library = SceneLibrary.scan(self.root)
+        # the method the engine listens with (a first start: the one a retrain would fit)
+        method = getattr(getattr(self.app.engine, "acoustic", None), "method", None)
         result = with_progress(
-            evaluate_audio, library, on_progress, pictures=False, protocol="temporal"
+            evaluate_audio,
+            library,
+            on_progress,
+            pictures=False,
+            method=method or FRESH_METHODS["audio"],
+            protocol=TAUGHT,
         )
         self.post_message(EvaluationDone(result))
 
@@ -229,4 +242,5 @@ class LibraryScreen(ReportsWorkerErrors, Screen[None]):
         self.evaluation = message.result
         self.query_one(WorkProgress).end(finished=True)
         self.query_one("#evaluation", Static).update(evaluation_table(message.result))
-        self.status(f"evaluated {message.result['n_test']} test windows")
+        how = PROTOCOL_WORDS.get(message.result["protocol"], message.result["protocol"])
+        self.status(f"evaluated {message.result['n_test']} test windows, {how}")

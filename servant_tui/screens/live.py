@@ -57,22 +57,50 @@ class DeviceBar(Static):
         self.update(self._render_statuses())
 
     def _render_statuses(self) -> str:
-        """Each device gets a third of the line, its message cut short to fit (the log and the
-        notification have it whole): a long camera message must not push the servo off."""
-        room = max((self.size.width - 2) // len(DEVICES) - 3, 12)
+        """Each device gets what its message needs while the line has room, and a share of what
+        is left when it has not (`shares`): a long camera message must not push the servo off.
+        A message too long for its share keeps its first clause whole (the problem; the advice
+        after `;` is in the log and the notification) before it is cut short."""
+        messages = {
+            device: device_message(status) if (status := self.statuses.get(device)) else ""
+            for device in DEVICES
+        }
+        needs = [len(device) + 3 + len(messages[device]) + 3 for device in DEVICES]
+        rooms = shares(needs, max(self.size.width - 2, 12 * len(DEVICES)))
         parts = []
-        for device in DEVICES:
+        for device, room in zip(DEVICES, rooms, strict=True):
             status = self.statuses.get(device)
             if status is None:
                 parts.append(f"[dim]{device} …   [/]")
                 continue
-            message = device_message(status)
-            if len(device) + 3 + len(message) > room:
-                message = message[: max(room - len(device) - 4, 0)] + "…"
+            message = fitted(messages[device], room - len(device) - 6)
             mark, style, body = ("✓", "green", "dim") if status.ok else ("✗", "bold red", "red")
             # spaces end the styled runs before them (see ServantApp.log_line)
             parts.append(f"[{style}]{device} {mark} [/][{body}]{escape(message)}   [/]")
         return "".join(parts).rstrip()
+
+
+def shares(needs: Sequence[int], total: int) -> list[int]:
+    """Widths for parts that need `needs`, within `total`: each gets its need if it is no more
+    than an even share of what the others leave, the rest share what remains evenly."""
+    given = [0] * len(needs)
+    left, waiting = total, sorted(range(len(needs)), key=lambda i: needs[i])
+    while waiting:
+        share = left // len(waiting)
+        i = waiting.pop(0)
+        given[i] = min(needs[i], share)
+        left -= given[i]
+    return given
+
+
+def fitted(message: str, room: int) -> str:
+    """`message` within `room` characters: whole, else its first clause, else cut with "…"."""
+    if len(message) <= room:
+        return message
+    clause = message.split("; ")[0]
+    if len(clause) <= room:
+        return clause
+    return message[: max(room - 1, 0)] + "…"
 
 
 class EventLog(RichLog):

@@ -20,11 +20,16 @@ from servant_core.library import SceneLibrary
 from servant_tui.heap import release_free_heap
 from servant_tui.widgets.progress import OnProgress
 
-# The app's help and quit, listed again so a screen's footer shows them before the app's other
-# keys (at 80 columns the footer has room for a handful).
+# The app's help and quit, listed again so a screen's footer shows them right after its own keys;
+# the app's other keys work here too but are not listed (at 80 columns the footer has room for a
+# handful), and help takes both its keys, or the app's f1 would list "? Help" a second time.
 HELP_AND_QUIT = [
-    Binding("question_mark", "app.help", "Help", key_display="?"),
+    Binding("question_mark,f1", "app.help", "Help", key_display="?"),
     Binding("q", "app.quit", "Quit"),
+    Binding("a", "app.toggle_arm", "Arm/Disarm", show=False),
+    Binding("t", "app.teach", "Teach", show=False),
+    Binding("l", "app.library", "Library", show=False),
+    Binding("s", "app.settings", "Settings", show=False),
 ]
 
 

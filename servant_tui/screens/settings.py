@@ -29,7 +29,16 @@ WINDOW_FIELDS = (
     ("picture_interval_s", "picture interval (s)"),
     ("confidence_threshold", "confidence threshold (%)"),
 )
-JOINT_FIELDS = ("min_angle", "max_angle", "max_speed_deg_s", "home_angle")
+# Each joint's fields and their column headings (narrow: eight columns fit in 80)
+JOINT_FIELDS = {
+    "channel": "channel",
+    "min_angle": "min °",
+    "max_angle": "max °",
+    "min_pulse_us": "min µs",
+    "max_pulse_us": "max µs",
+    "max_speed_deg_s": "°/s",
+    "home_angle": "home °",
+}
 
 
 def device_value(text: str) -> str | int | None:
@@ -44,7 +53,8 @@ def number(text: str, what: str, kind: type = float) -> Any:
     try:
         return kind(text.strip())
     except ValueError:
-        raise ServantError(f"{what}: {text!r} is not a number; type one") from None
+        words = "a whole number" if kind is int else "a number"
+        raise ServantError(f"{what}: {text!r} is not {words}; type one") from None
 
 
 class SettingsScreen(Screen[None]):
@@ -76,13 +86,17 @@ class SettingsScreen(Screen[None]):
                     allow_blank=False,
                     id="protocol",
                 )
-            yield Static("Joints (degrees, degrees per second)", classes="section")
+            yield Static(
+                "Joints: controller channel, angle limits (sent as the pulse widths beside "
+                "them), speed, home",
+                classes="section",
+            )
             with Grid(classes="joints"):
                 yield Label("joint")
-                for field in JOINT_FIELDS:
-                    yield Label(field.replace("_deg_s", "").replace("_", " "))
+                for heading in JOINT_FIELDS.values():
+                    yield Label(heading)
                 for joint in settings.joints:
-                    yield Label(f"{joint.name} (ch {joint.channel})")
+                    yield Label(joint.name)
                     for field in JOINT_FIELDS:
                         yield Input(
                             f"{getattr(joint, field):g}", id=f"{joint.name}-{field}", type="number"
@@ -122,9 +136,10 @@ class SettingsScreen(Screen[None]):
                 **{
                     field: number(
                         self.query_one(f"#{joint.name}-{field}", Input).value,
-                        f"{joint.name} {field}",
+                        f"{joint.name} {heading}",
+                        int if field == "channel" else float,
                     )
-                    for field in JOINT_FIELDS
+                    for field, heading in JOINT_FIELDS.items()
                 },
             )
             for joint in self.loaded.joints
@@ -154,7 +169,7 @@ class SettingsScreen(Screen[None]):
         self.app.settings = self.loaded = settings
         self.saved_form = self.form()
         self.app.log_line(None, f"settings saved to {path}")
-        self.notify(f"Saved to {path}. Devices change at the next start.", title="Settings")
+        self.notify(f"Saved to {path}.", title="Settings")
         return True
 
     @on(Button.Pressed, "#back")

@@ -37,7 +37,9 @@ from textual.widgets import (
 
 from servant_core.audio import DEFAULT_WINDOW_SECONDS, write_wav
 from servant_core.capture.sample_files import write_sample_csv
+from servant_core.engine.learning import retrained_text
 from servant_core.errors import ServantError
+from servant_core.event_text import pose_text
 from servant_core.events import SpectrumFrame
 from servant_core.features.palette import dominant_colours
 from servant_core.library import SceneLibrary
@@ -89,6 +91,7 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
         Binding("escape", "app.pop_screen", "Back"),
         Binding("ctrl+n", "step(1)", "Next"),
         Binding("ctrl+b", "step(-1)", "Previous"),
+        Binding("delete", "remove_sample", "Remove sample", show=False),
         *HELP_AND_QUIT,
     ]
 
@@ -101,6 +104,7 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
         self.learner: Any = None
         self.spectrum = Spectrum(id="teach-spectrum")
         self._recording_started: float | None = None
+        self._samples: dict[str, Any] = {}  # the samples table's rows: key -> teach record
 
     @property
     def root(self) -> Path:
@@ -170,6 +174,7 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
                         yield Button("Add sample", id="add-sample", variant="primary")
                         yield Button("Teach another scene", id="again")
                     yield DataTable(id="samples", cursor_type="row")
+                    yield Label("A wrong sample? Select it and press delete.", classes="hint")
                 with Vertical(id="train"):
                     yield Label(
                         "Learn scene → pose from every teach record; retrain the recognisers."
@@ -189,6 +194,7 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
     def on_mount(self) -> None:
         self.query_one("#error-curve").border_title = "training error (degrees)"
         self.query_one("#samples", DataTable).add_columns("scene", "pose", "source")
+        self._list_samples()
         self.query_one("#predictions", DataTable).add_columns("scene", *self.joints())
         self.query_one("#steps", OptionList).highlighted = 0
         self.set_interval(0.1, self._tick_recording, pause=False)
@@ -370,16 +376,25 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
 
     @on(Button.Pressed, "#guided")
     def use_arm_pose(self) -> None:
-        state = self.app.arm_state
-        if state is None or not state.connected:
-            self.app.report_error(
-                ServantError("arm: not connected, so its pose cannot be read; type the angles")
-            )
-            return
-        for joint, angle in state.angles.items():
+        self.read_arm_pose()
+
+    @work(thread=True, exclusive=True, group="arm-pose", exit_on_error=False)
+    def read_arm_pose(self) -> None:
+        """Ask the controller where the arm is (a serial exchange, off the UI thread): armed or
+        not, since the wearer guides the arm by hand disarmed."""
+        read = getattr(self.app.engine, "read_arm_pose", None)
+        if read is None:
+            raise ServantError("arm: this engine cannot read the arm's pose; type the angles")
+        self.app.call_from_thread(self._fill_pose, read())
+
+    def _fill_pose(self, pose: dict[str, float]) -> None:
+        # whole degrees: the controller's pulse steps read back as 19.98° for 20°
+        whole = {joint: float(round(angle)) for joint, angle in pose.items()}
+        for joint, angle in whole.items():
             for field in self.query(f"#joint-{joint}").results(Input):
                 field.value = f"{angle:g}"
         self._source = "recorded"
+        self.app.log_line(None, f"read the arm's pose: {pose_text(whole)}")
 
     def typed_pose(self) -> dict[str, float]:
         pose = {}
@@ -418,14 +433,55 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
             self.app.report_error(error)
             return
         self._source = "typed"
-        shown = ", ".join(f"{j} {a:g}°" for j, a in pose.items())
-        self.query_one("#samples", DataTable).add_row(scene, shown, record.source)
-        self.app.log_line(None, f"taught {scene}: {shown}")
+        self._show_sample(record)
+        self.app.log_line(None, f"taught {scene}: {pose_text(pose)}")
+
+    def _show_sample(self, record: Any) -> None:
+        key = str(len(self._samples))
+        self._samples[key] = record
+        self.query_one("#samples", DataTable).add_row(
+            record.scene, pose_text(record.pose), record.source, key=key
+        )
+
+    def _list_samples(self) -> None:
+        """Every teach record in the file, this session's and earlier ones."""
+        from servant_core.actions.records import load_records
+
+        self.query_one("#samples", DataTable).clear()
+        self._samples = {}
+        for record in self._try(load_records) or []:
+            self._show_sample(record)
+
+    def action_remove_sample(self) -> None:
+        """Remove the teach record selected in the samples table (a mistyped angle would
+        otherwise be averaged into the scene's pose for good)."""
+        from servant_core.actions.records import load_records, save_records
+
+        table = self.query_one("#samples", DataTable)
+        if self.focused is not table or table.row_count == 0:
+            self.notify("Select a sample in the list of samples, then press delete.")
+            return
+        key = table.coordinate_to_cell_key(table.cursor_coordinate).row_key.value
+        chosen = self._samples.get(str(key))
+        try:
+            records = load_records()
+            kept = [r for r in records if r != chosen]
+            if chosen is None or len(kept) == len(records):
+                raise ServantError("teach: that sample is no longer in the teach records")
+            save_records(kept)
+        except ServantError as error:
+            self.app.report_error(error)
+            return
+        self._list_samples()
+        self.app.log_line(None, f"removed a sample of {chosen.scene}: {pose_text(chosen.pose)}")
 
     @on(Button.Pressed, "#again")
     def teach_another(self) -> None:
         self.scene = None
         self.windows = self.pictures = 0
+        self._source = "typed"
+        for field in self.query("#pose-form Input").results(Input):
+            field.value = ""  # the next place's pose is its own
         self.query_one("#new-scene", Input).value = ""
         self.query_one("#known", Select).set_options((s, s) for s in self.known_scenes())
         self.go("scene")
@@ -498,8 +554,8 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
     @work(thread=True, exclusive=True, group="retrain", exit_on_error=False)
     def retrain(self, on_progress: OnProgress) -> None:
         library = SceneLibrary.scan(self.root)
-        with_progress(self.app.engine.retrain, library, on_progress)
-        self.post_message(RetrainDone(f"recognisers retrained on {len(library.scenes)} scenes"))
+        senses = with_progress(self.app.engine.retrain, library, on_progress)
+        self.post_message(RetrainDone(retrained_text(senses, library)))
 
     @on(RetrainDone)
     def retrained(self, message: RetrainDone) -> None:

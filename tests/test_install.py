@@ -1,0 +1,46 @@
+"""Issue 22 item 1: after `make install`, `servant` is a command in a new shell, and the README
+says so in its first lines."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import REPO
+
+pytestmark = pytest.mark.skipif(shutil.which("make") is None, reason="make is not installed")
+
+
+def test_make_install_puts_servant_on_the_path(tmp_path):
+    venv = Path(sys.prefix)  # the env these tests run in: `make setup` is not run again
+    bindir = tmp_path / "bin"
+    env = {**os.environ, "PATH": "/usr/bin:/bin"}
+    made = subprocess.run(
+        ["make", "-C", str(REPO), "-o", f"{venv}/.installed", "install"]
+        + [f"VENV={venv}", f"BINDIR={bindir}"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
+    assert made.returncode == 0, made.stderr
+    assert f'export PATH="{bindir}:$PATH"' in made.stdout  # not on PATH yet: says what to add
+    shell = {**env, "PATH": f"{bindir}:/usr/bin:/bin"}
+    found = shutil.which("servant", path=shell["PATH"])
+    assert found == str(bindir / "servant")
+    result = subprocess.run(
+        ["servant", "--help"], capture_output=True, text=True, env=shell, timeout=60
+    )
+    assert result.returncode == 0 and "train" in result.stdout, result.stderr
+
+
+def test_the_readme_says_how_to_get_servant_on_the_path_before_using_it():
+    readme = (REPO / "README.md").read_text()
+    first_use = readme.index("run `servant`")
+    assert -1 < readme.find("make install") < first_use
+    assert -1 < readme.find("source .venv/bin/activate") < first_use
