@@ -362,8 +362,8 @@ def main() -> int:
             )
         print(
             f"  wrong moves per hour of walking {result['wrong_moves_per_hour']:.1f}; first right "
-            f"move in a taught stay after {result['first_right_median_s']} s (median), within "
-            f"10 s in {result['first_right_within_10s']} of them, "
+            f"move in a taught stay after {result['first_right_median_s'] or float('nan'):.1f} s "
+            f"(median), within 10 s in {result['first_right_within_10s'] or 0.0:.2f} of them, "
             f"{result['taught_stays_without_a_right_move']} taught stays with none; right "
             f"moves in taught stays after their first 10 s: {result['right_after_10s']:.3f}"
         )
