@@ -110,11 +110,16 @@ class Engine:
     - `model_path`: the model file the recognisers came from. After a retrain or a fold-in the
       updated recognisers are saved back to it (atomically), so what the user taught survives a
       restart; None (the demo, or no model) keeps updates in memory only.
-    - `confidence_threshold`: percent; the arm does not act on a decision whose scene the less
-      sure sense gives less than this (None: no threshold of the engine's own).
+    - `confidence_threshold`: percent; the arm does not act on a decision less sure than this
+      that the wearer is in its scene and not somewhere else (`fusion.elsewhere`; with no sense
+      that knows elsewhere, the less sure sense's share) (None: no threshold of the engine's own).
     - `smoother`: a `SceneSmoother` that filters consecutive windows' probabilities, so that one
-      odd window does not flip the scene (recognisers in percent only; None: each window alone).
-      It starts afresh whenever the acoustic recogniser changes.
+      odd window does not flip the scene (recognisers in percent that know no elsewhere; None:
+      each window alone). It starts afresh whenever the acoustic recogniser changes. A sound
+      recogniser that knows elsewhere is held steady by `steady_open` instead (two windows in a
+      row name a place).
+    - `ask_after_s`: "What is this place?" (`UnknownScene` for the sound) once the sound has
+      named no taught place for this long.
 
     Public API used by front ends: `subscribe`, `start`, `stop`, `running`, `join`, `run_until`,
     `status`, `audio_rate`, `record_window`, `take_picture`, `latest_scores`, `retrain`,
