@@ -504,7 +504,8 @@ class Engine:
 
     def _unknown_held(self, known: bool, t: float) -> bool:
         """Whether the sound has named no taught place for `ask_after_s` (the window ending at t
-        included): only then is the wearer asked "What is this place?", once a stay."""
+        included): only then is the wearer asked "What is this place?", and at each window while
+        it holds (the app limits how often the question is shown)."""
         if known:
             self._unknown_since = None
             return False
