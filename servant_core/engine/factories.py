@@ -59,9 +59,11 @@ def build_demo_engine(
     """
     from servant_core.demo.motion_synth import write_sensor_library
     from servant_core.demo.scenes import (
+        SCENES,
         DemoCamera,
         demo_audio,
         train_demo_recognisers,
+        training_set,
         write_demo_library,
     )
     from servant_core.demo.sensors import demo_sensor_sources, train_sensor_recognisers
@@ -69,13 +71,19 @@ def build_demo_engine(
     if not realtime:
         clock = clock if isinstance(clock, ManualClock) else ManualClock()
     clock = clock or MonotonicClock()
-    acoustic, visual = train_demo_recognisers(seed, paper=paper, on_progress=on_progress)
+    total = len(SCENES) + 2
+    training = training_set(
+        seed, on_progress=None if on_progress is None else lambda done, _: on_progress(done, total)
+    )
+    acoustic, visual = train_demo_recognisers(
+        seed, paper=paper, on_progress=on_progress, training=training
+    )
     samples, stop_emulator = demo_sensor_sources(
         seed, clock=clock if isinstance(clock, ManualClock) and not realtime else None
     )
     sensing = train_sensor_recognisers(seed)
     if library_root is not None:
-        write_demo_library(library_root, seed)
+        write_demo_library(library_root, seed, training)
         write_sensor_library(library_root, seed)
     audio = demo_audio(seed, realtime=realtime, clock=clock if not realtime else None)
     why = None
