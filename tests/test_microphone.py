@@ -100,6 +100,23 @@ def test_lists_the_virtual_input_and_finds_it_by_name_and_index(virtual_mic):
         find_input_device("no such microphone anywhere")
 
 
+def test_a_reader_held_up_for_a_second_gets_all_of_it_at_once_and_loses_nothing(virtual_mic):
+    """A sense thread held up (a busy machine, a long garbage collection) must catch up in one
+    read, not one 20 ms block a turn: at one block a turn it never caught up, the queue filled,
+    blocks were dropped and teach mode's 5 s recording timed out."""
+    mic = Microphone()
+    mic.open()
+    try:
+        assert mic.read(5.0) is not None  # the stream runs
+        time.sleep(1.0)  # the reader is held up; PortAudio goes on queueing 20 ms blocks
+        block = mic.read(1.0)
+        assert block is not None
+        assert len(block) >= 0.8 * mic.rate, f"{len(block) / mic.rate:.2f} s in one read"
+        assert mic.overflows == 0
+    finally:
+        mic.close()
+
+
 def test_engine_window_and_spectrum_frames_contain_a_played_tone(virtual_mic, tmp_path):
     frames: list[SpectrumFrame] = []
     mic = Microphone(rate=RATE)

@@ -151,10 +151,19 @@ class Microphone:
             self.overflows += 1
 
     def read(self, timeout: float) -> np.ndarray | None:
+        """Every block queued since the last read, as one (waiting up to `timeout` for the
+        first). A sense thread held up by a busy machine or a garbage collection catches up in
+        one turn rather than one turn per 20 ms block, which it might never do: the queue would
+        fill and the sound be lost, and a 5 s recording take longer than 5 s to arrive."""
         try:
-            return self._queue.get(timeout=timeout)
+            blocks = [self._queue.get(timeout=timeout)]
         except queue.Empty:
-            pass
+            blocks = []
+        while blocks:
+            try:
+                blocks.append(self._queue.get_nowait())
+            except queue.Empty:
+                return blocks[0] if len(blocks) == 1 else np.concatenate(blocks)
         if self._stream is None or not self._stream.active:
             raise ServantError(
                 f"{self.name}: the input stream stopped (device unplugged?); reconnect it"
