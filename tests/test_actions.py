@@ -50,6 +50,34 @@ def test_records_round_trip_atomically():
     assert not list(default_records_path().parent.glob("*.tmp"))
 
 
+def test_appends_see_what_another_writer_put_in_the_file_meanwhile(tmp_path):
+    """Appends reuse the records this process last read or wrote while the file is unchanged
+    (3,000 labels on `servant teach` re-read the whole file each time); a file another writer
+    replaced, or changed in place, is read again, and nothing of theirs is lost."""
+    path = tmp_path / "records.json"
+    append_record(record("coffee", {"shoulder": 40.0}), path)
+    append_record(record("gym", {"shoulder": 10.0}), path)
+    # another process (the app beside `servant teach`) adds a record: a new file put in place
+    data = json.loads(path.read_text())
+    data["records"].append(json.loads(json.dumps(data["records"][0])) | {"scene": "street"})
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps(data))
+    other.replace(path)
+    after = append_record(record("office", {"shoulder": 5.0}), path)
+    assert [r.scene for r in after] == ["coffee", "gym", "street", "office"]
+    # an editor that writes in place (same inode): a different length is seen too
+    data = json.loads(path.read_text())
+    data["records"] = data["records"][:1]
+    with path.open("r+") as handle:
+        handle.seek(0)
+        handle.truncate()
+        handle.write(json.dumps(data))
+    assert [r.scene for r in load_records(path)] == ["coffee"]
+    after = append_record(record("gym", {"shoulder": 11.0}), path)
+    assert [r.scene for r in after] == ["coffee", "gym"]
+    assert [r.scene for r in load_records(path)] == ["coffee", "gym"]
+
+
 def test_a_broken_record_file_is_refused_and_kept(tmp_path):
     path = tmp_path / "records.json"
     path.write_text('{"format": "servant-teach-records", "version": 2, "records": [')

@@ -11,6 +11,7 @@ It becomes a pose for one joint (`legacy_joint`) and certain scores for its scen
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -122,6 +123,49 @@ def _migrate_v1(raw_records: Sequence[Any], legacy_joint: str) -> list[dict[str,
     ]
 
 
+@dataclass
+class _Known:
+    """A record file as this process last read or wrote it: what identifies that version of
+    the file (inode, modification time, size), its records and their lines."""
+
+    signature: tuple[int, int, int]
+    records: list[TeachRecord]
+    lines: list[str] | None = None
+
+
+# Record files this process has read or written, by absolute path. `servant teach` adds a record
+# a label, and reading and checking every record each time made 3,000 labels take minutes
+# (issue 24); an unchanged file is taken from here instead. Another writer (the app and the CLI
+# at once) replaces the file, which changes its inode: it is then read again.
+_KNOWN: dict[Path, _Known] = {}
+
+
+def _signature(path: Path) -> tuple[int, int, int] | None:
+    try:
+        status = os.stat(path)
+    except OSError:
+        return None
+    return (status.st_ino, status.st_mtime_ns, status.st_size)
+
+
+def _remember(path: Path, records: Sequence[TeachRecord], lines: list[str] | None) -> None:
+    signature = _signature(path)
+    if signature is not None:
+        _KNOWN[path.absolute()] = _Known(signature, list(records), lines)
+
+
+def _load(path: Path, legacy_joint: str) -> tuple[int, list[TeachRecord], list[str] | None]:
+    """(version, records, their lines if known) of the file, from `_KNOWN` while unchanged."""
+    known = _KNOWN.get(path.absolute())
+    if known is not None and known.signature == _signature(path):
+        lines = None if known.lines is None else list(known.lines)
+        return VERSION, list(known.records), lines
+    version, records = _read(path, legacy_joint)
+    if version == VERSION:
+        _remember(path, records, None)
+    return version, records, None
+
+
 def _read(path: Path, legacy_joint: str) -> tuple[int, list[TeachRecord]]:
     fix = "fix or move the file away (Servant never overwrites it)"
     text = read_bounded_bytes(path, "teach record file", MAX_FILE_BYTES)
@@ -178,7 +222,7 @@ def load_records(
     path = Path(path) if path is not None else default_records_path()
     if not path.exists():
         return []
-    return _read(path, legacy_joint)[1]
+    return _load(path, legacy_joint)[1]
 
 
 def _fields(record: TeachRecord) -> dict[str, Any]:
@@ -186,22 +230,36 @@ def _fields(record: TeachRecord) -> dict[str, Any]:
     return {f.name: getattr(record, f.name) for f in fields(TeachRecord)}
 
 
+def _line(record: TeachRecord) -> str:
+    return json.dumps(_fields(record), sort_keys=True)
+
+
+def _text(lines: Sequence[str]) -> str:
+    head = json.dumps({"format": FORMAT, "version": VERSION})[:-1]
+    body = ",\n".join(lines)
+    return f'{head}, "records": [\n{body}\n]}}\n' if lines else f'{head}, "records": []}}\n'
+
+
 def encode_records(records: Sequence[TeachRecord]) -> str:
     """The file's text: one record a line, so that it stays readable and diffable."""
-    head = json.dumps({"format": FORMAT, "version": VERSION})[:-1]
-    lines = ",\n".join(json.dumps(_fields(r), sort_keys=True) for r in records)
-    return f'{head}, "records": [\n{lines}\n]}}\n' if records else f'{head}, "records": []}}\n'
+    return _text([_line(r) for r in records])
 
 
-def save_records(records: Sequence[TeachRecord], path: str | Path | None = None) -> Path:
+def save_records(
+    records: Sequence[TeachRecord], path: str | Path | None = None, lines: list[str] | None = None
+) -> Path:
+    """Write the records (`lines`: their lines, if made already), atomically."""
     path = Path(path) if path is not None else default_records_path()
+    lines = lines if lines is not None else [_line(r) for r in records]
     try:
-        return atomic_write_text(path, encode_records(records))
+        written = atomic_write_text(path, _text(lines))
     except OSError as exc:
         raise ServantError(
             f"{path}: cannot save the teach records ({os_reason(exc)}); the file is unchanged; "
             "check that its folder can be written to and has space"
         ) from None
+    _remember(path, records, lines)
+    return written
 
 
 def append_record(
@@ -210,7 +268,7 @@ def append_record(
     """Add `record` to the file, atomically; returns every record now in it."""
     path = Path(path) if path is not None else default_records_path()
     _record(_fields(record))  # the same checks a reader applies: never write what cannot be read
-    version, records = _read(path, legacy_joint) if path.exists() else (VERSION, [])
+    version, records, lines = _load(path, legacy_joint) if path.exists() else (VERSION, [], [])
     if version < VERSION:
         backup = path.with_name(f"{path.name}.v{version}.bak")
         if not backup.exists():
@@ -223,5 +281,6 @@ def append_record(
                 ) from None
     records.append(record)
     _check_bounds(path, records, "nothing was added; start another record file")
-    save_records(records, path)
+    lines = [*lines, _line(record)] if lines is not None else None
+    save_records(records, path, lines)
     return records
