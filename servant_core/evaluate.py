@@ -323,8 +323,10 @@ def _evaluate_folds(
     plan: AudioPlan,
     make_model: Callable[[], Recogniser],
     names: Sequence[str],
+    on_fold: Callable[[], None] | None = None,
 ) -> dict[str, Any]:
-    """Fit one model per fold (train mask), predict its test mask, pool and score."""
+    """Fit one model per fold (train mask), predict its test mask, pool and score;
+    `on_fold()` after each fold."""
     preds = Predictions([], [], [])
     tested: list[np.ndarray] = []  # the recording of each test window, in prediction order
     skipped: list[str] = []
@@ -340,10 +342,12 @@ def _evaluate_folds(
                 raise
             left_out = np.unique(wf.recording[test])
             skipped.append(f"{', '.join(Path(names[r]).name for r in left_out)}: {error}")
-            continue
-        preds.extend(model, wf.features[test], wf.scenes[test])
-        tested.append(wf.recording[test])
-        n_train += int(train.sum())
+        else:
+            preds.extend(model, wf.features[test], wf.scenes[test])
+            tested.append(wf.recording[test])
+            n_train += int(train.sum())
+        if on_fold is not None:
+            on_fold()
     result = scores(preds, sorted(set(wf.scenes.tolist())))
     result["per_recording"] = per_recording(preds, np.concatenate(tested), names)
     result.update(n_train=n_train, skipped_folds=skipped)
@@ -373,14 +377,26 @@ def evaluate_windows(
     plans: Sequence[AudioPlan],
     make_model: Callable[[int | None], Recogniser],
     seeds: int = 1,
+    on_progress: Callable[[int, int], None] | None = None,
 ) -> list[dict[str, Any]]:
     """One scored row per plan; `make_model(seed)` gives a fresh model for a random state
-    (None: the method's own). Benchmarks score other methods through this same path."""
+    (None: the method's own). Benchmarks score other methods through this same path.
+    `on_progress(done, total)` after each model fitted and tested (every fold of every plan,
+    for each seed)."""
     rows = []
+    total = sum(len(plan.folds) for plan in plans) * max(seeds, 1)
+    done = 0
+
+    def fold_done() -> None:
+        nonlocal done
+        done += 1
+        if on_progress is not None:
+            on_progress(done, total)
+
     for plan in plans:
 
         def run(seed: int | None, plan: AudioPlan = plan) -> dict[str, Any]:
-            return _evaluate_folds(wf, plan, lambda: make_model(seed), names)
+            return _evaluate_folds(wf, plan, lambda: make_model(seed), names, fold_done)
 
         row = over_seeds(run, seeds)
         row.update(protocol=plan.protocol, sense="audio", n_recordings=len(np.unique(wf.recording)))
@@ -458,9 +474,11 @@ def evaluate_audio(
     shots: Sequence[int] = DEFAULT_SHOTS,
     seeds: int = 1,
     groups: Mapping[str, str] | None = None,
+    on_fold: Callable[[int, int], None] | None = None,
 ) -> dict[str, Any]:
     """Score `method` on `library`'s windows under `protocol`; with `test_library`, train on all
-    of `library` and test on all of `test_library` (protocol `train-test`). `fewshot` gives one
+    of `library` and test on all of `test_library` (protocol `train-test`); `on_progress` follows
+    the listening, `on_fold(done, total)` the models fitted and tested. `fewshot` gives one
     row per number of `shots` under `rows`. `source` leaves out one group of recordings at a
     time: `groups` (recording path relative to the root -> group) or each file's source. With
     `seeds` > 1 every figure is a mean over random states 0..seeds-1 (see `over_seeds`)."""
@@ -490,6 +508,7 @@ def evaluate_audio(
             wf.recordings,
         ),
         seeds,
+        on_fold,
     )
     for row in rows:
         row["method"] = method

@@ -139,3 +139,22 @@ def test_bad_shots_and_seeds_are_refused_by_the_parser(libraries, capsys, argv, 
     assert exit_.value.code == 2
     err = capsys.readouterr().err
     assert err.startswith("servant: error:") and says in err and err.count("\n") == 1
+
+
+def test_eval_audio_follows_every_fold_after_the_listening(libraries):
+    """After the listening's bar came a silence of minutes while the folds trained (issue 22):
+    each model fitted and tested is now counted, to the total of folds times seeds."""
+    from servant_core.evaluate import evaluate_audio
+    from servant_core.library import SceneLibrary
+
+    seen: list[tuple[int, int]] = []
+    result = evaluate_audio(
+        SceneLibrary.scan(libraries[0]),
+        "kmeans-encoder",
+        "recording",
+        seeds=2,
+        on_fold=lambda done, total: seen.append((done, total)),
+    )
+    folds = 2 * len(SCENES)  # a model for each recording left out, for each seed
+    assert seen == [(k, folds * 2) for k in range(1, folds * 2 + 1)]
+    assert result["seeds"] == 2

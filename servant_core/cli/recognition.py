@@ -595,6 +595,7 @@ def cmd_eval_audio(args: argparse.Namespace) -> int:
         shots=args.shots,
         seeds=args.seeds,
         groups=groups,
+        on_fold=Progress("training and testing, a model a fold"),
     )
     text = _format_fewshot(result) if "rows" in result else _format_scores(result)
     emit(args, result, text)
