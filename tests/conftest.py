@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -69,3 +70,19 @@ def servant(*args: str, env: dict[str, str] | None = None) -> subprocess.Complet
         env=env,
         timeout=120,
     )
+
+
+def serve(*args: str) -> tuple[subprocess.Popen[str], str]:
+    """`servant ARGS` (an emulator) in its own process, and the port its first line names
+    ("… on PORT; …" or "… on PORT …"); the caller stops the process."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "servant_tui", *args], stdout=subprocess.PIPE, text=True, cwd=REPO
+    )
+    assert proc.stdout is not None
+    first = proc.stdout.readline()
+    found = re.search(r" on (\S+?);? ", first)
+    if found is None:
+        proc.kill()
+        proc.wait()
+        raise AssertionError(f"servant {' '.join(args)} named no port: {first!r}")
+    return proc, found.group(1)

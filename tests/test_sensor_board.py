@@ -4,8 +4,6 @@ pty (pyserial), a vanished port, and CSV logs replayed."""
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 import time
 
 import numpy as np
@@ -27,6 +25,7 @@ from servant_core.capture.sensors import (
 )
 from servant_core.capture.source import ManualClock, SampleSource
 from servant_core.errors import ServantError
+from tests.conftest import serve
 
 
 def read_rows(source, seconds: float) -> np.ndarray:
@@ -108,16 +107,9 @@ def test_a_vanished_port_is_one_clear_error_and_the_source_reopens():
 
 def test_emulate_sensors_command_serves_until_killed():
     # its own process: killing it unplugs the board for real
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "servant_tui", "emulate-sensors", "--script", "gym:5,coffee:5"],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
+    proc, port = serve("emulate-sensors", "--script", "gym:5,coffee:5")
     try:
-        assert proc.stdout is not None
-        found = re.search(r" on (\S+) ", proc.stdout.readline())
-        assert found is not None
-        source = SensorBoard(found.group(1)).source("imu")
+        source = SensorBoard(port).source("imu")
         source.open()
         rows = read_rows(source, 0.5)
         assert rows.shape[1] == 6 and len(rows) > 10

@@ -14,6 +14,7 @@ from servant_core.actions.records import load_records
 from servant_core.cli import main
 from servant_core.servo.emulator import start_emulator
 from servant_core.settings import default_joints
+from tests.conftest import serve
 
 FIG6 = "coffee\n42\ngym\n10\n\ncoffee\ngym\n"
 
@@ -277,17 +278,11 @@ def test_teach_files_that_cannot_be_saved_are_one_line(option, what, monkeypatch
 def test_emulate_servo_prints_a_line_per_move_it_receives(tmp_path, monkeypatch, capsys):
     """Issue 22 item 9: the emulator's terminal says what it was sent, once per move (the link
     sends a rate-limited move as many small targets)."""
-    emulator = subprocess.Popen(
-        [sys.executable, "-m", "servant_tui", "emulate-servo", "--seconds", "60"],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
+    emulator, port = serve("emulate-servo", "--seconds", "60")
     try:
         assert emulator.stdout is not None
-        port = re.search(r" on (\S+);", emulator.stdout.readline())
-        assert port is not None
         status, out, _ = run(
-            ["servo", "move", "--port", port.group(1), "shoulder=40", "elbow=30"],
+            ["servo", "move", "--port", port, "shoulder=40", "elbow=30"],
             "",
             monkeypatch,
             capsys,

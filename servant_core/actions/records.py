@@ -21,7 +21,6 @@ from servant_core.errors import ServantError
 from servant_core.numbers import is_finite_number, json_loads
 from servant_core.storage import (
     atomic_write_bytes,
-    atomic_write_text,
     data_dir,
     os_reason,
     read_bounded_bytes,
@@ -148,10 +147,18 @@ def _signature(path: Path) -> tuple[int, int, int] | None:
     return (status.st_ino, status.st_mtime_ns, status.st_size)
 
 
-def _remember(path: Path, records: Sequence[TeachRecord], lines: list[str] | None) -> None:
-    signature = _signature(path)
-    if signature is not None:
+def _remember(
+    path: Path,
+    signature: tuple[int, int, int] | None,
+    records: Sequence[TeachRecord],
+    lines: list[str] | None,
+) -> None:
+    """Keep what `path` held when it had `signature`, unless it has changed since (another
+    writer, between this process's read or write and now): then it is read again next time."""
+    if signature is not None and signature == _signature(path):
         _KNOWN[path.absolute()] = _Known(signature, list(records), lines)
+    else:
+        _KNOWN.pop(path.absolute(), None)
 
 
 def _load(path: Path, legacy_joint: str) -> tuple[int, list[TeachRecord], list[str] | None]:
@@ -160,9 +167,10 @@ def _load(path: Path, legacy_joint: str) -> tuple[int, list[TeachRecord], list[s
     if known is not None and known.signature == _signature(path):
         lines = None if known.lines is None else list(known.lines)
         return VERSION, list(known.records), lines
+    before = _signature(path)
     version, records = _read(path, legacy_joint)
     if version == VERSION:
-        _remember(path, records, None)
+        _remember(path, before, records, None)
     return version, records, None
 
 
@@ -251,14 +259,18 @@ def save_records(
     """Write the records (`lines`: their lines, if made already), atomically."""
     path = Path(path) if path is not None else default_records_path()
     lines = lines if lines is not None else [_line(r) for r in records]
+    data = _text(lines).encode("utf-8")
     try:
-        written = atomic_write_text(path, _text(lines))
+        written = atomic_write_bytes(path, data)
     except OSError as exc:
         raise ServantError(
             f"{path}: cannot save the teach records ({os_reason(exc)}); the file is unchanged; "
             "check that its folder can be written to and has space"
         ) from None
-    _remember(path, records, lines)
+    signature = _signature(path)
+    if signature is not None and signature[2] != len(data):  # another writer's file by now
+        signature = None
+    _remember(path, signature, records, lines)
     return written
 
 
