@@ -106,3 +106,24 @@ async def test_a_pose_without_angles_is_refused_in_one_line(tmp_path, monkeypatc
         await settle(pilot, lambda: app._notifications)
         assert any("elbow needs an angle" in n.message for n in app._notifications)
         assert records.load_records() == []
+
+
+async def test_enter_records_window_after_window_from_the_keyboard(tmp_path, monkeypatch):
+    """A wearer on the keyboard: Enter on *Record 5 s*, and again once it is done. Disabling the
+    button while it recorded took the focus away, so the second Enter recorded nothing."""
+    monkeypatch.setenv("SERVANT_DATA_DIR", str(tmp_path / "data"))
+    monkeypatch.setenv("SERVANT_CONFIG_DIR", str(tmp_path / "config"))
+    engine = ReplayEngine(window_source=noise_recording(12.0, 500.0, seed=3), audio_rate=RATE)
+    app = ServantApp(engine, library_root=tmp_path / "library")
+    async with app.run_test(size=(120, 40)) as pilot:
+        await settle(pilot, lambda: engine.started.is_set())
+        await pilot.press("t")
+        await settle(pilot, lambda: isinstance(app.screen, TeachScreen))
+        screen = app.screen
+        await type_into(pilot, "#new-scene", "CoffeeScene")
+        await pilot.press("enter")
+        screen.query_one("#record").focus()
+        for k in (1, 2):
+            await settle(pilot, lambda: not screen.query_one("#record").disabled)
+            await pilot.press("enter")
+            await settle(pilot, lambda k=k: screen.windows == k, tries=400)

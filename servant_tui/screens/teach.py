@@ -331,8 +331,13 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
         return write_sample_csv(folder / f"{name}{kind.suffixes[0]}", rows, rate, str(kind.stream))
 
     def _recording_over(self) -> None:
+        """The button back, and the focus on it while the sound step shows: disabling it took
+        the focus away, and Enter (record another) then did nothing."""
         self._recording_started = None
-        self.query_one("#record", Button).disabled = False
+        record = self.query_one("#record", Button)
+        record.disabled = False
+        if self.query_one("#step", ContentSwitcher).current == "sound":
+            record.focus()
 
     @on(RecordingDone)
     def recorded(self, message: RecordingDone) -> None:
