@@ -31,6 +31,10 @@ T = TypeVar("T")
 # times: such samples (a float32 file at its maximum, a damaged MP3 frame) overflow the
 # features' squares and sums into infinity and NaN.
 MAX_AMPLITUDE = 1000.0
+# Below this level (RMS, dB relative to full scale) a window is silence, not a place: a muted or
+# unplugged microphone, a paused stream. 16-bit quantisation noise alone is about -101 dBFS; the
+# quietest 5 s of the 84 dev recordings (a train at night) is -78 dBFS.
+SILENT_DBFS = -90.0
 
 
 def to_mono(samples: np.ndarray) -> np.ndarray:
@@ -188,6 +192,18 @@ def _decode_mono(path: Path, handle: Any, info: Any) -> np.ndarray:
             "scale; the file is damaged, record it again"
         )
     return np.concatenate([mono, *beyond]) if beyond else mono[:decoded]
+
+
+def level_dbfs(window: np.ndarray) -> float:
+    """The RMS level of `window` in dB relative to full scale (±1); -inf for exact zeros."""
+    samples = np.asarray(window, dtype=np.float64)
+    power = float(np.mean(samples**2)) if samples.size else 0.0
+    return 10.0 * np.log10(power) if power > 0 else float("-inf")
+
+
+def is_silent(window: np.ndarray) -> bool:
+    """Whether `window` is below `SILENT_DBFS`: it says nothing about where the wearer is."""
+    return level_dbfs(window) < SILENT_DBFS
 
 
 def first_line(exc: BaseException) -> str:

@@ -8,6 +8,7 @@ import sys
 import numpy as np
 import pytest
 
+from servant_core.audio import read_audio, write_wav
 from servant_core.cli import main
 from tests.conftest import REPO, link_library, servant
 
@@ -95,6 +96,18 @@ def test_train_predict_and_table(small_library, tmp_path, capsys):
     assert len(out["acoustic"]) == 7 and out["visual"][0]["picture"] == str(picture)
     assert out["decision"]["line"].endswith("detected")
     assert (out["decision"]["line"] == "No scene detected") == (out["decision"]["scene"] is None)
+    # a muted stretch names no place: its window is left out, said in one line
+    street = read_audio(small_library / "street" / "moodist-traffic.mp3", 16000)[: 16000 * 10]
+    muted = np.zeros(16000 * 5, np.float32)
+    gap = write_wav(tmp_path / "gap.wav", np.concatenate([street[:80000], muted, street]), 16000)
+    assert main(["predict", str(model), "--audio", str(gap), "--json"]) == 0
+    said = capsys.readouterr()
+    assert [w["window"] for w in json.loads(said.out)["acoustic"]] == [0, 2, 3]
+    assert "windows 1: silence, no place named" in said.err
+    silent = write_wav(tmp_path / "silent.wav", muted, 16000)
+    assert main(["predict", str(model), "--audio", str(silent)]) == 2
+    err = capsys.readouterr().err
+    assert "silence (below -90 dBFS) from start to end" in err and err.count("\n") == 1
     assert main(["table", str(small_library), "--audio-method", "paper"]) == 0
     text = capsys.readouterr().out
     assert "Table I" in text and "Table II" in text and "street picture" in text

@@ -24,11 +24,12 @@ from servant_core.events import (
     ArmState,
     Decision,
     ErrorEvent,
+    Notice,
     SpectrumFrame,
     UnknownScene,
     VisualPrediction,
 )
-from servant_core.fusion import FusionConfig, SequentialFusion
+from servant_core.fusion import FusionConfig, ParallelFusion, SequentialFusion
 from servant_core.library import SceneLibrary, featurize_recordings
 from servant_core.modelfile import load_model, save_model
 from servant_core.recognisers import UNKNOWN
@@ -440,6 +441,75 @@ def test_a_detected_scene_moves_the_arm_to_its_pose_only_when_armed(recognisers)
         emulator.stop()
     with pytest.raises(ServantError, match="no arm attached"):
         Engine().arm()
+
+
+def test_silence_names_no_place_asks_nothing_and_never_moves_the_arm():
+    """A muted microphone (exact zeros) under the camera of a taught place, armed: the engine
+    names no place (a recogniser asked about silence may name one: a teach-mode model on real
+    recordings called it "street 84.8 %"), asks nothing, says so once, and the arm stays. The
+    coffee shop's sound afterwards moves it (the same engine, not a dead one)."""
+    poses = {scene: {"shoulder": 30.0 + 10 * k} for k, scene in enumerate(SCENES)}
+    emulator, port = start_emulator("maestro")
+    clock, link_clock = ManualClock(), LinkClock()
+    link = ServoLink.open(
+        port, "maestro", default_joints(), clock=link_clock, sleep=link_clock.sleep
+    )
+    acoustic, visual = train_demo_recognisers(seed=0, paper=False)  # Servant's own, in %
+    coffee = np.concatenate(
+        [synth_window("coffee", np.random.default_rng([5, k])) for k in range(8)]
+    )
+    silence = np.zeros(DEMO_RATE * 60, dtype=np.float32)
+    audio = PacedAudio(
+        [Clip("silence", silence), Clip("coffee", coffee)], DEMO_RATE, realtime=False, clock=clock
+    )
+    shots = iter(range(10**6))
+
+    class CoffeeCamera:  # the coffee shop's pictures all along
+        name = "coffee camera"
+
+        def open(self): ...
+        def read(self):
+            return synth_picture("coffee", np.random.default_rng([6, next(shots)]))
+
+        def close(self): ...
+
+    try:
+        engine = Engine(
+            audio=audio,
+            camera=CoffeeCamera(),
+            acoustic=acoustic,
+            visual=visual,
+            clock=clock,
+            fusion=ParallelFusion(),
+        )
+        events = collect(engine)
+        engine.set_arm(link)
+        engine.set_action_learner(lambda scene, scores, confidence: poses.get(scene))
+        engine.arm()
+        engine.run_until(60.0)
+        heard = [e for e in events if isinstance(e, AcousticPrediction)]
+        assert len(heard) == 12 and all(e.scene is None and e.confidence == 0 for e in heard)
+        notices = [e.message for e in events if isinstance(e, Notice) and "silence" in e.message]
+        assert len(notices) == 1 and "muted" in notices[0]
+        assert not any(isinstance(e, UnknownScene) for e in events)  # nothing to ask about
+        assert not any(isinstance(e, Decision) and e.scene for e in events)
+        assert link.goal == {}
+        engine.run_until(100.0)
+        engine.stop()
+        assert any(isinstance(e, Decision) and e.scene == "coffee" for e in events)
+        assert link.goal == poses["coffee"]
+    finally:
+        link.close()
+        emulator.stop()
+
+
+def test_a_recording_of_silence_is_refused_not_taught():
+    rate = 8000
+    quiet = np.zeros(rate * 20, dtype=np.float32)
+    quiet[::7] = 1e-6  # -137 dBFS: a muted input's dither, not a place
+    with Engine(audio=PacedAudio([Clip(None, quiet)], rate, realtime=True)) as engine:
+        with pytest.raises(ServantError, match="silence .* record again"):
+            engine.record_window(1.0)
 
 
 def test_a_model_for_another_window_length_is_reported_once_and_the_engine_goes_on(recognisers):

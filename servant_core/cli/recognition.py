@@ -11,7 +11,14 @@ from typing import Any, cast
 
 import numpy as np
 
-from servant_core.audio import DEFAULT_RATE, DEFAULT_WINDOW_SECONDS, cut_windows, read_audio
+from servant_core.audio import (
+    DEFAULT_RATE,
+    DEFAULT_WINDOW_SECONDS,
+    SILENT_DBFS,
+    cut_windows,
+    is_silent,
+    read_audio,
+)
 from servant_core.cli import emit, one_line, options
 from servant_core.engine import FRESH_METHODS, decision_unit
 from servant_core.engine.learning import library_fusion_net, refit_samples
@@ -415,8 +422,17 @@ def cmd_predict(args: argparse.Namespace) -> int:
             raise ServantError(
                 f"{args.audio}: shorter than one {seconds:g} s window; record longer"
             )
+        silent = np.array([is_silent(w) for w in windows])
+        if np.all(silent):
+            raise ServantError(
+                f"{args.audio}: silence (below {SILENT_DBFS:.0f} dBFS) from start to end: "
+                "no place to name; was the microphone muted?"
+            )
+        if np.any(silent):
+            where = ", ".join(map(str, np.flatnonzero(silent)))
+            _warn(ServantError(f"{args.audio}: windows {where}: silence, no place named"))
         X = audio.featurize(windows)
-        usable = usable_rows(X)
+        usable = usable_rows(X) & ~silent
         if not np.any(usable):
             raise ServantError(
                 f"{args.audio}: no window gives features that are finite numbers; "

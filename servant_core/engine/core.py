@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from servant_core.audio import DEFAULT_WINDOW_SECONDS, resample
+from servant_core.audio import DEFAULT_WINDOW_SECONDS, SILENT_DBFS, is_silent, resample
 from servant_core.capture.source import (
     AudioSource,
     FrameSource,
@@ -221,6 +221,7 @@ class Engine:
         self._open_roles: set[str] = set()  # roles whose probabilities know somewhere else
         # the last window's probabilities, where the sound knows somewhere else
         self._previous_window: dict[str, float] | None = None
+        self._silent = False  # the last window was silence (its notice was given)
         # the predictions whose last window was skipped as unusable: told once, not each window
         self._skipping: set[str] = set()
         self.sensor_port: str | None = None  # the settings' board the senses were opened on
@@ -410,6 +411,10 @@ class Engine:
         if acoustic is None:
             return
         t = self.clock()
+        if is_silent(window):
+            self._on_silence(acoustic, t)
+            return
+        self._silent = False
         model_rate = getattr(acoustic, "rate", rate)
         X = acoustic.featurize(resample(window, rate, model_rate)[None, :])
         scene, confidence, scores = _predict(acoustic, X)
@@ -433,6 +438,29 @@ class Engine:
             self._ask_label(Kept("audio", window, rate), scores, t)
         with self._lock:
             events = self._judged("audio", scene if known else None, confidence, t, scores)
+        self._handle(events)
+
+    def _on_silence(self, acoustic: Recogniser, t: float) -> None:
+        """A silent window (a muted microphone, digital zeros) names no place, for the arm too:
+        a recogniser asked about silence still picks a taught place. It is not asked about
+        either; what the sound believed before the silence is forgotten."""
+        if not self._silent:  # one notice for a run of silent windows
+            self._silent = True
+            self._emit(
+                Notice(
+                    t,
+                    f"microphone: silence (below {SILENT_DBFS:.0f} dBFS) names no place until "
+                    "sound comes back; is the microphone muted?",
+                )
+            )
+        scores = {str(s): 0.0 for s in acoustic.scenes_}
+        with self._lock:
+            self._forget_windows()
+            self._unknown_since = None
+            self._scores["acoustic"] = scores
+        self._emit(AcousticPrediction(t, None, 0.0, scores, acoustic.confidence_unit))
+        with self._lock:
+            events = self._judged("audio", None, 0.0, t, scores)
         self._handle(events)
 
     def _judged(
@@ -696,7 +724,13 @@ class Engine:
             raise ServantError("engine: not running; start it before recording")
         if self._hearing is None:
             raise ServantError("microphone: no sound to record; check the microphone (see status)")
-        return self._hearing.record(seconds, timeout)
+        window = self._hearing.record(seconds, timeout)
+        if is_silent(window):  # a place taught as silence would be named wherever it is quiet
+            raise ServantError(
+                f"microphone: the recording is silence (below {SILENT_DBFS:.0f} dBFS) and was not "
+                "kept; unmute or check the microphone, then record again"
+            )
+        return window
 
     def record_samples(
         self, sense: str, seconds: float = DEFAULT_WINDOW_SECONDS, timeout: float | None = None
