@@ -103,7 +103,7 @@ class ServantApp(App[None]):
         self.arm_state: ArmState | None = None
         self.seen_scenes: set[str] = set()
         self.live = LiveScreen(sample_senses=getattr(engine, "sample_senses", ()))
-        self._prompt_open = False
+        self._prompt: LabelPrompt | None = None  # the open "What is this place?"
         self._quiet_until: float | None = None  # engine time before which no place is asked about
         self._noticed: set[str] = set()
         engine.subscribe(self._from_engine)
@@ -205,6 +205,7 @@ class ServantApp(App[None]):
             self.notify(f"{event.device}: {device_message(event)}", severity="warning")
         elif isinstance(event, UnknownScene):
             self._ask_label(event)
+        self._withdraw_question(event)
         for screen in self._event_screens():
             screen.show_event(event)
 
@@ -271,19 +272,41 @@ class ServantApp(App[None]):
     def _ask_label(self, event: UnknownScene) -> None:
         """Ask the wearer to name an unknown place, unless a question is open, another screen
         (teach mode, the library, settings) is in front, or one was asked or skipped lately."""
-        if self._prompt_open or self.screen is not self.live:
+        if self._prompt is not None or self.screen is not self.live:
             return
         if self._quiet_until is not None and event.t < self._quiet_until:
             return
-        self._prompt_open = True
+        prompt = self._prompt = LabelPrompt(event, sorted(self.known_scenes))
 
         def answered(scene: str | None) -> None:
-            self._prompt_open = False
-            self._quiet_until = event.t + (PROMPT_EVERY_S if scene else PROMPT_AFTER_SKIP_S)
+            self._prompt = None
+            skipped = scene is None and not prompt.withdrawn
+            self._quiet_until = event.t + (PROMPT_AFTER_SKIP_S if skipped else PROMPT_EVERY_S)
             if scene:
                 self.label_unknown(event.window_id, scene)
 
-        self.push_screen(LabelPrompt(event, sorted(self.known_scenes)), answered)
+        self.push_screen(prompt, answered)
+
+    def _withdraw_question(self, event: Any) -> None:
+        """An open "What is this place?" is stale once the sense it asked for names a taught
+        place, or a place is decided: the wearer walked on (or the place was known after all).
+        The question closes by itself, said in the log; no answer is taken for a skip."""
+        prompt = self._prompt
+        if prompt is None or prompt.withdrawn or not getattr(event, "scene", None):
+            return
+        asked = prompt.event.sense
+        named = (
+            isinstance(event, Decision)
+            or (isinstance(event, AcousticPrediction) and asked == "audio")
+            or (isinstance(event, VisualPrediction) and asked == "image")
+            or (isinstance(event, SensePrediction) and asked == event.sense)
+        )
+        if named:
+            self.log_line(
+                event.t,
+                f"[magenta]question withdrawn: this is {escape(place(event.scene))} now[/]",
+            )
+            prompt.withdraw()
 
     @work(thread=True, group="label", exit_on_error=False)
     def label_unknown(self, window_id: str, scene: str) -> None:

@@ -8,7 +8,7 @@ import time
 import pytest
 
 from servant_core.errors import ServantError
-from servant_core.events import ArmState, ErrorEvent
+from servant_core.events import AcousticPrediction, ArmState, Decision, ErrorEvent, UnknownScene
 from servant_tui.app import ServantApp
 from servant_tui.screens.dialogs import HelpScreen, LabelPrompt
 from servant_tui.screens.live import fitted, shares
@@ -84,6 +84,31 @@ async def test_unknown_place_prompts_and_labels(tmp_path):
         await settle(pilot, lambda: engine.labels)
         assert engine.labels == [("window-7", "Library")]
         assert not isinstance(app.screen, LabelPrompt)
+
+
+@pytest.mark.parametrize("named_by", ["sound", "decision"])
+async def test_a_question_the_sound_has_answered_since_closes_by_itself(tmp_path, named_by):
+    """Issue 22: "What is this place?" stayed open after the wearer walked into a taught place
+    and it was recognised. The sound naming a place (or a place decided) withdraws it, says so,
+    and is not taken for a skip: the next unknown place is asked about a minute later, not
+    five."""
+    engine = ReplayEngine(script=[UnknownScene(40.0, "audio", "street", "window-7")])
+    app = ServantApp(engine, library_root=tmp_path)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await settle(pilot, lambda: isinstance(app.screen, LabelPrompt))
+        engine.emit(AcousticPrediction(45.0, None, 0.0, {"cafe": 0.2}, "%"))  # still unknown
+        await pilot.pause()
+        assert isinstance(app.screen, LabelPrompt)
+        if named_by == "sound":
+            engine.emit(AcousticPrediction(50.0, "cafe", 81.0, {"cafe": 0.81}, "%"))
+        else:
+            engine.emit(Decision(50.0, "cafe", 70.0, "CafeScene detected", 81.0, 60.0))
+        await settle(pilot, lambda: not isinstance(app.screen, LabelPrompt))
+        assert "question withdrawn: this is cafe now" in log_text(app)
+        assert engine.labels == []
+        engine.emit(UnknownScene(120.0, "audio", "street", "window-9"))  # 70 s on: asked again
+        await settle(pilot, lambda: isinstance(app.screen, LabelPrompt))
+        assert app.screen.event.window_id == "window-9"
 
 
 async def test_errors_are_logged_and_notified_not_fatal(tmp_path):

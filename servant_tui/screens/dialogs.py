@@ -66,6 +66,11 @@ class LabelPrompt(ModalScreen[str | None]):
         super().__init__()
         self.event = event
         self.known_scenes = known_scenes
+        self.withdrawn = False  # closed by the app: the place is known now, nothing to answer
+
+    def withdraw(self) -> None:
+        self.withdrawn = True
+        self.dismiss(None)
 
     def compose(self) -> ComposeResult:
         sense = {"audio": "heard", "image": "saw"}.get(
