@@ -9,6 +9,7 @@ recogniser says it is a probability in percent; the paper's eq. 1 and eq. 2 are 
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 UNKNOWN_PLACE = "an unknown place"
@@ -26,10 +27,16 @@ def confidence_text(confidence: float, unit: str | None, width: int = 0) -> str:
     return f"{number} {unit}" if unit else number
 
 
+def angle_text(angle: float) -> str:
+    """An angle in whole degrees ("20°", never "-0°": a whole number has no sign of zero); "—"
+    for none (NaN). A servo's step is coarser than a degree, so decimals would only show the
+    float arithmetic of the speed limits or a learner's rounding ("-0.0°" for 0°)."""
+    return f"{round(angle):d}°" if math.isfinite(angle) else "—"
+
+
 def pose_text(pose: dict[str, float]) -> str:
-    """A pose in words, whole degrees ("shoulder 10°, elbow 20°"): a servo's step is coarser
-    than a degree, so decimals would only show the float arithmetic of the speed limits."""
-    return ", ".join(f"{joint} {round(angle):d}°" for joint, angle in pose.items()) or "no joint"
+    """A pose in words, whole degrees ("shoulder 10°, elbow 20°"; see `angle_text`)."""
+    return ", ".join(f"{joint} {angle_text(angle)}" for joint, angle in pose.items()) or "no joint"
 
 
 def arm_text(state: Any) -> str:

@@ -56,6 +56,7 @@ async def test_records_of_servant_teach_with_one_angle_train_with_home_angles(tm
         await pilot.click("#train-learner")
         await settle(pilot, lambda: screen.learner is not None, tries=1000)
         coffee = [str(c) for c in screen.query_one("#predictions", DataTable).get_row("coffee")]
+        assert all("." not in v and not v.startswith("-0") for v in coffee[1:]), coffee
         shoulder, elbow = (float(v.rstrip("°")) for v in coffee[1:3])
         assert abs(shoulder - 42.0) < 5.0
         assert abs(elbow - settings.joint("elbow").home_angle) < 5.0, "elbow stays home"
@@ -115,3 +116,13 @@ async def test_known_scenes_include_what_the_engine_recognises(tmp_path):
         known = app.screen.query_one("#known", Select)
         options = [value for _, value in known._options if isinstance(value, str)]
         assert options == ["coffee", "gym", "library-scene", "street"]
+
+
+def test_the_test_steps_angles_are_whole_degrees_never_minus_zero():
+    """Issue 22: the Test step showed "-0.0°" for a gripper taught at 0° (the learner's output
+    was a hair below zero)."""
+    from servant_core.event_text import angle_text, pose_text
+
+    assert [angle_text(a) for a in (-0.04, -0.4, 19.98, 90.0)] == ["0°", "0°", "20°", "90°"]
+    assert angle_text(float("nan")) == "—"
+    assert pose_text({"shoulder": 19.98, "gripper": -0.02}) == "shoulder 20°, gripper 0°"

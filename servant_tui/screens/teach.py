@@ -39,7 +39,7 @@ from servant_core.audio import DEFAULT_WINDOW_SECONDS, write_wav
 from servant_core.capture.sample_files import write_sample_csv
 from servant_core.engine.learning import retrained_text
 from servant_core.errors import ServantError
-from servant_core.event_text import pose_text
+from servant_core.event_text import angle_text, pose_text
 from servant_core.events import SpectrumFrame
 from servant_core.features.palette import dominant_colours
 from servant_core.library import SceneLibrary
@@ -579,7 +579,7 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
         for scene in learner.taught_scenes_:
             pose = learner.pose(label_scores(scene, learner.scenes_))
             table.add_row(
-                scene, *(f"{pose.get(j, float('nan')):.1f}°" for j in self.joints()), key=scene
+                scene, *(angle_text(pose.get(j, float("nan"))) for j in self.joints()), key=scene
             )
 
     def work_failed(self, group: str, error: BaseException) -> None:
