@@ -245,5 +245,10 @@ class SerialSamples:
     def exhausted(self) -> bool:
         return False
 
+    @property
+    def bad_lines(self) -> int:
+        """Lines the board sent that were not readings (both streams), since it was made."""
+        return self.board.bad_lines
+
     def close(self) -> None:
         self.board.release(self.kind)

@@ -19,6 +19,7 @@ import numpy as np
 from servant_core.capture.ring import RingBuffer
 from servant_core.capture.source import AudioSource, FrameSource, SampleSource
 from servant_core.engine.bus import EventBus
+from servant_core.engine.stream_watch import News, StreamWatch
 from servant_core.errors import ServantError
 from servant_core.events import SensorFrame, SpectrumFrame
 from servant_core.senses import Sense
@@ -266,6 +267,8 @@ class Feeling:
         self._total = 0
         self._retry_at = 0.0
         self._frame_at = -1.0
+        self._watch: StreamWatch | None = None  # a live source's health, from its opening
+        self._junk_at_open = 0
 
     @property
     def device(self) -> str:
@@ -282,6 +285,16 @@ class Feeling:
         self._rows = []  # windows start afresh after (re)opening, as the sound's do
         self.ok = True
         self.bus.report(self.device, True, f"{self.source.name}: reading at {self.source.rate} Hz")
+        if getattr(self.source, "live", False):  # a board: watched for stalls and its rate
+            self._watch = StreamWatch(self.source.name, self.source.rate, self.bus.clock())
+            self._junk_at_open = self._junk()
+
+    def _junk(self) -> int:
+        return int(getattr(self.source, "bad_lines", 0))
+
+    def _said(self, news: News | None) -> None:
+        if news is not None:
+            self.bus.report(self.device, news.ok, news.message)
 
     def close(self) -> None:
         self.source.close()
@@ -312,10 +325,17 @@ class Feeling:
             self.close()
             self._retry_at = self.bus.clock() + self.reopen_seconds
             return
+        watch = self._watch
         if block is None or not len(block):
             if self.source.exhausted:
                 self.bus.report(self.device, False, f"{self.source.name}: finished")
+            elif watch is not None:
+                self._said(watch.quiet(self.bus.clock(), self._junk() - self._junk_at_open))
             return
+        if watch is not None:
+            self._said(watch.arrived(self.bus.clock(), len(block)))
+            if not watch.usable:  # readings at another rate than the windows are cut by
+                return
         block = np.asarray(block, dtype=np.float32).reshape(len(block), -1)
         self._keep(block)
         t = self.bus.clock()
