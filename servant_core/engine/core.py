@@ -221,6 +221,7 @@ class Engine:
         self._open_roles: set[str] = set()  # roles whose probabilities know somewhere else
         # the last window's probabilities, where the sound knows somewhere else
         self._previous_window: dict[str, float] | None = None
+        self._previous_far = False  # the last window was far from every taught place
         self._silent = False  # the last window was silence (its notice was given)
         # the predictions whose last window was skipped as unusable: told once, not each window
         self._skipping: set[str] = set()
@@ -420,11 +421,15 @@ class Engine:
         scene, confidence, scores = _predict(acoustic, X)
         unit = acoustic.confidence_unit
         if knows_elsewhere(acoustic):
-            # unknown though its probabilities name a place: far from every place taught
+            # unknown though its probabilities name a place: far from every place taught. Held
+            # steady as the probabilities are: two far windows in a row, not one odd one (on
+            # bench/wearer_day.py a lone far window cost 3 places a twentieth of their right
+            # moves and kept no wrong one away: docs/research.md, issue 21)
             far = scene == UNKNOWN and sum(scores.values()) > 0.5
             with self._lock:
                 previous, self._previous_window = self._previous_window, scores
-            named, scores = steady_open(scores, previous or {}, far)
+                far_before, self._previous_far = self._previous_far, far
+            named, scores = steady_open(scores, previous or {}, far and far_before)
             scene = UNKNOWN if named is None else named
             confidence = 100.0 * scores[named] if named else 0.0
         elif self.smoother is not None and unit == "%":
@@ -522,6 +527,7 @@ class Engine:
         if self.smoother is not None:
             self.smoother.reset()
         self._previous_window = None
+        self._previous_far = False
 
     def _note_open(self, role: str, recogniser: Recogniser) -> None:
         """Remember whether a role's probabilities leave room for somewhere else (under _lock)."""
