@@ -10,6 +10,7 @@ from types import SimpleNamespace
 import pytest
 from textual.widgets import DataTable, Input, Select
 
+from servant_core.audio import write_wav
 from servant_tui.app import ServantApp
 from servant_tui.screens.teach import TeachScreen
 from tests.test_tui_live import settle
@@ -126,3 +127,26 @@ def test_the_test_steps_angles_are_whole_degrees_never_minus_zero():
     assert [angle_text(a) for a in (-0.04, -0.4, 19.98, 90.0)] == ["0°", "0°", "20°", "90°"]
     assert angle_text(float("nan")) == "—"
     assert pose_text({"shoulder": 19.98, "gripper": -0.02}) == "shoulder 20°, gripper 0°"
+
+
+@pytest.mark.parametrize("library_has", [[], ["street"]])
+async def test_teach_mode_opens_where_the_first_answer_is_typed(tmp_path, library_has):
+    """Issue 22, README step 2 ("press t, name it") from the keyboard: the focus was on the
+    steps list, and a name typed at once went nowhere."""
+    root = tmp_path / "library"
+    for scene in library_has:
+        write_wav(root / scene / "a.wav", noise_recording(5.0, 300.0, seed=1), RATE)
+    app = ServantApp(ReplayEngine(script=[]), library_root=root)  # a first start: no model
+    async with app.run_test(size=(120, 40)) as pilot:
+        await settle(pilot, app.engine.started.is_set)
+        await pilot.press("t")
+        await settle(pilot, lambda: isinstance(app.screen, TeachScreen))
+        screen = app.screen
+        await pilot.pause()
+        if library_has:
+            assert screen.focused is screen.query_one("#known", Select)
+            await pilot.press("tab")  # past the known scenes to a new one's name
+        else:
+            assert screen.focused is screen.query_one("#new-scene", Input)
+        await pilot.press(*"cafe", "enter")
+        await settle(pilot, lambda: screen.scene == "cafe")

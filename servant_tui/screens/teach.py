@@ -198,6 +198,13 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
         self.query_one("#predictions", DataTable).add_columns("scene", *self.joints())
         self.query_one("#steps", OptionList).highlighted = 0
         self.set_interval(0.1, self._tick_recording, pause=False)
+        self.call_after_refresh(self._focus_first_answer)
+
+    def _focus_first_answer(self) -> None:
+        """Teach mode opens where the first answer is typed (README step 2: "press t, name it"):
+        the new scene's name, or the known scenes when there are some. With the focus on the
+        steps list, a name typed at once went nowhere."""
+        self.query_one("#known" if self.known_scenes() else "#new-scene").focus()
 
     def sample_senses(self) -> list[str]:
         """The engine's sample senses (motion, ambient): recorded with the sound."""
