@@ -150,3 +150,30 @@ async def test_teach_mode_opens_where_the_first_answer_is_typed(tmp_path, librar
             assert screen.focused is screen.query_one("#new-scene", Input)
         await pilot.press(*"cafe", "enter")
         await settle(pilot, lambda: screen.scene == "cafe")
+
+
+async def test_train_then_retrain_from_the_keyboard(tmp_path):
+    """README step 3 by keyboard: Enter on Train, then Enter again retrains the recognisers
+    (the screen jumped to the Test step after training, leaving Retrain out of reach)."""
+    now = time.time()
+    for scene, angle in (("coffee", 10.0), ("gym", 60.0)):
+        records.append_record(
+            records.TeachRecord(
+                scene, records.label_scores(scene, ["coffee", "gym"]), {"shoulder": angle}, now
+            )
+        )
+        write_wav(tmp_path / "library" / scene / "a.wav", noise_recording(5.0, angle * 20, 2), RATE)
+    engine = ReplayEngine()
+    app = ServantApp(engine, library_root=tmp_path / "library", settings=settings_module.Settings())
+    async with app.run_test(size=(120, 40)) as pilot:
+        screen = await open_teach(pilot, app)
+        screen.go("train")
+        await pilot.pause()
+        screen.query_one("#train-learner").focus()
+        await pilot.press("enter")
+        await settle(pilot, lambda: screen.learner is not None, tries=1000)
+        await pilot.pause()
+        assert screen.focused is screen.query_one("#retrain")
+        await pilot.press("enter")
+        await settle(pilot, lambda: engine.retrained)
+        assert screen.query_one("#predictions", DataTable).row_count == 2  # Test is filled too

@@ -553,10 +553,15 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
         self.learner = message.learner
         final = self.errors[-1] if self.errors else float("nan")
         summary = f"trained on {message.learner.n_records_} teach records; error {final:.2f}°"
-        self.query_one("#train-status", Static).update(summary)
+        # README step 3 goes on with Retrain in this step: the focus goes there (jumping to the
+        # Test step left Retrain a step back, out of Enter's reach); Test shows the poses
+        self.query_one("#train-status", Static).update(
+            f"{summary}. Next: Retrain recognisers; the poses are in the Test step."
+        )
         self.app.log_line(None, summary)
         self.show_predictions()
-        self.go("test")
+        if self.query_one(ContentSwitcher).current == "train":
+            self.query_one("#retrain", Button).focus()
 
     @on(Button.Pressed, "#retrain")
     def start_retrain(self) -> None:
