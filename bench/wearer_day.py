@@ -101,10 +101,12 @@ class RecordingLink:
     """Stands in for the servo link: always armed, keeps each pose it is sent with the time."""
 
     armed = True
+    at_goal = True  # it gets where it is sent at once
 
     def __init__(self, clock: ManualClock) -> None:
         self.clock = clock
         self.moves: list[tuple[float, str]] = []
+        self.commanded: dict[str, float] = {}
 
     def move_to(self, pose: dict[str, str]) -> None:
         self.moves.append((self.clock(), pose["place"]))

@@ -443,6 +443,29 @@ def test_a_detected_scene_moves_the_arm_to_its_pose_only_when_armed(recognisers)
         Engine().arm()
 
 
+def test_the_arm_is_said_to_move_once_for_a_place_not_at_every_decision_there(recognisers):
+    """Each decision in the café sends its pose again; the arm, there already, does not move,
+    and the log said "arm moved to coffee's pose" every 5 s (found in a tmux walk)."""
+    emulator, port = start_emulator("maestro")
+    clock = LinkClock()
+    link = ServoLink.open(port, "maestro", default_joints(), clock=clock, sleep=clock.sleep)
+    try:
+        engine = build_demo_engine(seed=0, realtime=False, arm=False)
+        events = collect(engine)
+        engine.set_arm(link)
+        engine.set_action_learner(lambda scene, scores, confidence: {"shoulder": 30.0})
+        engine.arm()
+        engine.run_until(29.0)  # the café, decided again and again
+        engine.stop()
+    finally:
+        link.close()
+        emulator.stop()
+    decided = [e for e in events if isinstance(e, Decision) and e.scene == "coffee"]
+    said = [e for e in events if isinstance(e, ArmState) and e.pose_of is not None]
+    assert len(decided) >= 2
+    assert [e.pose_of for e in said] == ["coffee"]
+
+
 def test_silence_names_no_place_asks_nothing_and_never_moves_the_arm():
     """A muted microphone (exact zeros) under the camera of a taught place, armed: the engine
     names no place (a recogniser asked about silence may name one: a teach-mode model on real

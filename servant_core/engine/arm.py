@@ -205,10 +205,20 @@ class ArmControl:
         moved = False
         try:
             if link.armed:
+                before = dict(link.commanded)
                 link.move_to(pose)
-                moved = link.armed and link.at_goal  # not disarmed nor cut short on the way
+                # not disarmed nor cut short on the way, and somewhere new: a pose the arm
+                # held already, sent again at the next decision, is not a move to report
+                moved = link.armed and link.at_goal and _went(before, link.commanded)
         except ServantError as error:
             self.bus.report("servo", False, str(error))
         except Exception as exc:
             self.bus.report("servo", False, f"servo: move failed ({type(exc).__name__}: {exc})")
         self.emit_state(scene if moved else None)
+
+
+def _went(before: dict[str, float], after: dict[str, float]) -> bool:
+    """Whether a joint moved by half a degree or more (what a whole-degree report would show)."""
+    return any(
+        abs(angle - before.get(joint, float("inf"))) >= 0.5 for joint, angle in after.items()
+    )
