@@ -68,9 +68,11 @@ class Progress:
         self.enabled = bool(getattr(self.stream, "isatty", lambda: False)())
 
     def __call__(self, done: int, total: int) -> None:
+        now = self.clock()
+        if done <= 0:  # the work begins now (what came before, loading modules, is not its pace)
+            self.started = now
         if not self.enabled:
             return
-        now = self.clock()
         finished = done >= total
         if not finished and now - self.drawn_at < self.interval:
             return

@@ -362,6 +362,18 @@ def test_progress_draws_on_a_terminal_only():
     assert terminal.getvalue().count("\r") == 2 and terminal.getvalue().endswith("done in 0:02\n")
 
 
+def test_a_progress_estimate_starts_when_the_work_does():
+    """The demo loads its modules, then says `(0, total)`: the pace (and the time left) is
+    counted from there, not from the bar's creation (issue 22 item 10: `4/5 0:02 left` for
+    15 s)."""
+    terminal = Terminal()
+    ticks = iter([0.0, 6.0, 7.0])  # created; (0, 4) after 6 s of loading; (1, 4) 1 s later
+    progress = Progress("demo", terminal, interval=0.0, clock=lambda: next(ticks))
+    progress(0, 4)
+    progress(1, 4)
+    assert terminal.getvalue().endswith("1/4  0:03 left")  # not 0:21 (7 s a step)
+
+
 def test_featurize_reports_progress_for_every_recording_even_skipped(tmp_path):
     lib = audio_library(tmp_path / "lib")
     (lib / "gym" / "bad.wav").write_bytes(b"nothing")

@@ -134,6 +134,12 @@ def demo_recognisers(seed: int = 0, *, paper: bool = True) -> tuple[Any, Any]:
     )
 
 
+# A recogniser's fit takes about as long as synthesising two scenes (bench/progress_estimates.py)
+FIT_STEPS = 2
+# The demo's training in steps: each scene synthesised, then the two fits.
+TRAINING_STEPS = len(SCENES) + 2 * FIT_STEPS
+
+
 def train_demo_recognisers(
     seed: int = 0,
     windows_per_scene: int = 6,
@@ -145,8 +151,9 @@ def train_demo_recognisers(
 ) -> tuple[Any, Any]:
     """The demo's two recognisers (see `demo_recognisers`), fitted on freshly synthesised scenes
     (a second or two), or on `training` (`training_set`'s, made already); `on_progress(done,
-    total)` after each scene synthesised and each fit."""
-    total = len(SCENES) + 2
+    total)` after each scene synthesised and each fit, a fit counting as `FIT_STEPS` scenes
+    (about its share of the time: the bar's estimate assumes a steady pace)."""
+    total = TRAINING_STEPS
 
     def report(done: int, _total: int = total) -> None:
         if on_progress is not None:
@@ -159,7 +166,7 @@ def train_demo_recognisers(
     windows, window_scenes, pictures, picture_scenes = training
     acoustic, visual = demo_recognisers(seed, paper=paper)
     acoustic.fit(acoustic.featurize(windows), window_scenes)
-    report(len(SCENES) + 1)
+    report(len(SCENES) + FIT_STEPS)
     visual.fit(visual.featurize(pictures), picture_scenes)
     report(total)
     return acoustic, visual

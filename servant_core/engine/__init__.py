@@ -16,7 +16,7 @@ from servant_core.engine.factories import (
     pose_for_taught,
     steady,
 )
-from servant_core.engine.learning import UNKNOWN_KEPT, progress_part
+from servant_core.engine.learning import UNKNOWN_KEPT
 from servant_core.engine.loop import RING_SECONDS, SPECTRUM_FPS, SPECTRUM_SIZE, spectrum_db
 from servant_core.recognisers import FRESH_METHODS
 
@@ -41,7 +41,6 @@ __all__ = [
     "decision_unit",
     "fusion_config",
     "pose_for_taught",
-    "progress_part",
     "spectrum_db",
     "steady",
 ]

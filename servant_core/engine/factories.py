@@ -59,7 +59,7 @@ def build_demo_engine(
     """
     from servant_core.demo.motion_synth import write_sensor_library
     from servant_core.demo.scenes import (
-        SCENES,
+        TRAINING_STEPS,
         DemoCamera,
         demo_audio,
         train_demo_recognisers,
@@ -71,7 +71,9 @@ def build_demo_engine(
     if not realtime:
         clock = clock if isinstance(clock, ManualClock) else ManualClock()
     clock = clock or MonotonicClock()
-    total = len(SCENES) + 2
+    total = TRAINING_STEPS
+    if on_progress is not None:
+        on_progress(0, total)  # the modules loaded: the work, and its estimate, begin
     training = training_set(
         seed, on_progress=None if on_progress is None else lambda done, _: on_progress(done, total)
     )

@@ -103,27 +103,26 @@ def retrained(
 ) -> tuple[dict[str, Recogniser], list[ServantError]]:
     """({sense: refitted recogniser}, why others could not be) for each sense with files in
     the library: a copy of its `current` recogniser refitted, or a new one of its fresh method.
-    Sound first, then pictures, then each sample sense; `on_progress` runs over them all."""
+    Sound first, then pictures, then each sample sense. `on_progress` follows each sense in
+    two phases, as the bar's estimate can: its files read, `(done, files)`, then its fit, `(0,
+    1)` and `(1, 1)` (a fit has no steps of its own; on a teach-mode library it is most of the
+    time, so one bar over the files alone sat full for most of the retrain)."""
     parts: list[tuple[str, Sequence[Any]]] = [
         ("audio", library.recordings),
         ("image", library.pictures),
         *library.samples.items(),
     ]
-    total, offset = sum(len(files) for _, files in parts), 0
     fitted: dict[str, Recogniser] = {}
     failures: list[ServantError] = []
     for sense, files in parts:
         if not files:
             continue
-        progress = progress_part(on_progress, offset, total)
-        offset += len(files)
         lacking = too_few_scenes(sense, files, library)
         if lacking is not None:
             failures.append(lacking)
-            if progress is not None:
-                progress(len(files), len(files))
             continue
         model = copy_or_fresh(current.get(sense), sense, fresh_methods[sense])
+        progress = fitting_after_reading(on_progress, len(files))
         try:
             if sense == "audio":
                 new = refit_audio(library, model, window_seconds, on_error, progress)
@@ -135,6 +134,8 @@ def retrained(
         except ServantError as error:
             failures.append(ServantError(f"retrain ({sense_words(sense)}): {error}"))
             continue
+        if on_progress is not None:
+            on_progress(1, 1)
         if new is not None:
             fitted[sense] = new
     return fitted, failures
@@ -279,13 +280,19 @@ def save_models(
         )
 
 
-def progress_part(on_progress: OnProgress | None, offset: int, total: int) -> OnProgress | None:
-    """A part of a job reports `(done, its own total)`; the job's `on_progress` hears
-    `(offset + done, total)`, so one bar runs over every part without going back."""
+def fitting_after_reading(on_progress: OnProgress | None, files: int) -> OnProgress | None:
+    """What a sense's refit reports as it reads its `files`; once the last is read, the fit
+    begins: `(0, 1)`, a phase of one step whose end the caller reports."""
     if on_progress is None:
         return None
     report = on_progress
-    return lambda done, _part_total: report(offset + done, total)
+
+    def progress(done: int, _total: int) -> None:
+        report(done, files)
+        if done >= files:
+            report(0, 1)
+
+    return progress
 
 
 def sample_windows(

@@ -234,6 +234,9 @@ class LibraryScreen(ReportsWorkerErrors, Screen[None]):
             pictures=False,
             method=method or FRESH_METHODS["audio"],
             protocol=TAUGHT,
+            # the same bar, a second phase: a model fitted and tested per sample left out (the
+            # listening is a moment; the bar sat full while every fold was fitted)
+            on_fold=on_progress,
         )
         self.post_message(EvaluationDone(result))
 
