@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from fractions import Fraction
 from pathlib import Path
@@ -195,15 +196,16 @@ def _decode_mono(path: Path, handle: Any, info: Any) -> np.ndarray:
 
 
 def level_dbfs(window: np.ndarray) -> float:
-    """The RMS level of `window` in dB relative to full scale (±1); -inf for exact zeros."""
+    """The RMS level of `window` in dB relative to full scale (±1); -inf for exact zeros, NaN
+    when a sample is not a number (such a window is unusable, not silent)."""
     samples = np.asarray(window, dtype=np.float64)
     power = float(np.mean(samples**2)) if samples.size else 0.0
-    return 10.0 * np.log10(power) if power > 0 else float("-inf")
+    return 10.0 * math.log10(power) if power != 0 else float("-inf")
 
 
 def is_silent(window: np.ndarray) -> bool:
     """Whether `window` is below `SILENT_DBFS`: it says nothing about where the wearer is."""
-    return level_dbfs(window) < SILENT_DBFS
+    return level_dbfs(window) < SILENT_DBFS  # False for NaN
 
 
 def first_line(exc: BaseException) -> str:

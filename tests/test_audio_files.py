@@ -156,3 +156,14 @@ def test_a_file_name_that_is_not_utf8_is_read(tmp_path):
     path = tmp_path / name
     write_wav(path, tone(440, 0.5, 8000), 8000)
     assert len(read_audio(path, 8000)) == 4000
+
+
+def test_silence_is_below_minus_90_dbfs_and_a_window_that_is_not_numbers_is_not_silent():
+    from servant_core.audio import is_silent, level_dbfs
+
+    assert level_dbfs(np.ones(100, np.float32)) == pytest.approx(0.0)
+    assert is_silent(np.zeros(100, np.float32)) and is_silent(np.full(100, 1e-5, np.float32))
+    assert not is_silent(np.full(100, 1e-4, np.float32))  # -80 dBFS: a quiet room is a place
+    # NaN or infinity: unusable (said as such elsewhere), not "the microphone is muted"
+    assert not is_silent(np.array([np.nan, 0.0, 0.0], np.float32))
+    assert not is_silent(np.array([np.inf, 0.0, 0.0], np.float32))
