@@ -117,7 +117,9 @@ def test_retrain_fits_the_sample_senses_of_a_library_and_saves_them(tmp_path):
     progress: list[tuple[int, int]] = []
     engine.retrain(library, on_progress=lambda done, total: progress.append((done, total)))
     assert sorted(engine.sample_recognisers) == ["ambient", "motion"]
-    assert progress[-1] == (36, 36)  # one bar over both senses' logs
+    # each sense's 18 logs read, then its fit, a phase of one step (`learning.retrained`)
+    sense_phases = [(k, 18) for k in range(1, 19)] + [(0, 1), (1, 1)]
+    assert progress == sense_phases * 2
     saved = load_model(model_path)
     assert sorted(saved) == ["ambient", "motion"]
     # and the saved motion recogniser names the scene of a fresh log
