@@ -36,4 +36,7 @@ def test_ctrl_c_early_prints_no_traceback(after: float, tmp_path) -> None:
     _, err = child.communicate(timeout=60)
     assert b"Traceback" not in err and b"KeyboardInterrupt" not in err, err.decode()
     assert len(err.splitlines()) <= 1, err.decode()  # the error if it had finished first
-    assert child.returncode in (130, 2), child.returncode
+    # 130: Ctrl-C handled; 2: the command's own error came first; -SIGINT: the signal came as
+    # Python was exiting (finalisation restores the default handler), which ends it silently
+    # just the same, as a shell's status 130 (seen once in a loaded full run at 1.5 s)
+    assert child.returncode in (130, 2, -signal.SIGINT), child.returncode
