@@ -198,8 +198,8 @@ def _decode_mono(path: Path, handle: Any, info: Any) -> np.ndarray:
 def level_dbfs(window: np.ndarray) -> float:
     """The RMS level of `window` in dB relative to full scale (±1); -inf for exact zeros, NaN
     when a sample is not a number (such a window is unusable, not silent)."""
-    samples = np.asarray(window, dtype=np.float64)
-    power = float(np.mean(samples**2)) if samples.size else 0.0
+    samples = np.asarray(window, dtype=np.float64).ravel()
+    power = float(samples @ samples) / samples.size if samples.size else 0.0
     return 10.0 * math.log10(power) if power != 0 else float("-inf")
 
 

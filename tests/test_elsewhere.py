@@ -145,6 +145,22 @@ def tone_windows() -> tuple[np.ndarray, list[str]]:
 # --- asking only when an untaught place holds ------------------------------------------------
 
 
+def heard_through_the_engine(model, sound: np.ndarray) -> list:
+    """Every event of the engine listening with `model` to `sound` (at the model's rate), on a
+    manual clock, to its end."""
+    clock = ManualClock()
+    engine = Engine(
+        audio=PacedAudio([Clip(None, sound)], model.rate, realtime=False, clock=clock),
+        acoustic=model,
+        clock=clock,
+        spectrum_fps=0,
+    )
+    events: list = []
+    engine.subscribe(events.append)
+    engine.run_until(len(sound) / model.rate + 1.0)
+    return events
+
+
 @pytest.mark.slow
 def test_what_is_this_place_is_asked_once_an_untaught_place_held_30_s(
     two_places, shared_data
@@ -154,16 +170,7 @@ def test_what_is_this_place_is_asked_once_an_untaught_place_held_30_s(
     site = read_audio(
         shared_data / "audio/dev/construction/relaxandsleep-construction-site.mp3", rate
     )[: 45 * rate]
-    clock = ManualClock()
-    engine = Engine(
-        audio=PacedAudio([Clip(None, site)], rate, realtime=False, clock=clock),
-        acoustic=model,
-        clock=clock,
-        spectrum_fps=0,
-    )
-    events: list = []
-    engine.subscribe(events.append)
-    engine.run_until(46.0)
+    events = heard_through_the_engine(model, site)
     heard = [e for e in events if isinstance(e, AcousticPrediction)]
     asked = [e for e in events if isinstance(e, UnknownScene)]
     assert sum(e.scene is None for e in heard) >= 8
@@ -193,18 +200,7 @@ def test_one_window_far_from_every_place_does_not_unname_it_two_in_a_row_do(
     rate = model.rate
     cafe = read_audio(shared_data / "audio/dev/cafe/audio-ambient-cafe.mp3", rate)
     start = 3 * 5 * rate  # after the three taught windows
-    clock = ManualClock()
-    engine = Engine(
-        audio=PacedAudio(
-            [Clip(None, cafe[start : start + 30 * rate])], rate, realtime=False, clock=clock
-        ),
-        acoustic=far_model,
-        clock=clock,
-        spectrum_fps=0,
-    )
-    events: list = []
-    engine.subscribe(events.append)
-    engine.run_until(31.0)
+    events = heard_through_the_engine(far_model, cafe[start : start + 30 * rate])
     heard = [e.scene for e in events if isinstance(e, AcousticPrediction)]
     assert len(heard) == 6
     assert heard[0] is None  # the first window alone names nothing (two in a row do)

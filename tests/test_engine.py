@@ -64,6 +64,22 @@ def library(tmp_path_factory):
     return SceneLibrary.scan(root)
 
 
+class ShowingCamera:
+    """A camera showing what `picture()` gives at each read (a place's pictures, a colour)."""
+
+    name = "test camera"
+
+    def __init__(self, picture) -> None:
+        self.picture = picture
+
+    def open(self) -> None: ...
+
+    def read(self):
+        return self.picture()
+
+    def close(self) -> None: ...
+
+
 def collect(engine: Engine) -> list:
     events: list = []
     engine.subscribe(events.append)
@@ -298,16 +314,6 @@ def test_an_unknown_picture_is_asked_about_and_labelled_into_the_library(tmp_pat
     visual = OpenSetVisual().fit(OpenSetVisual().featurize(pictures), list(SCENES * 3))
     clock = ManualClock()
     purple = np.full((120, 160, 3), (200, 30, 160), np.uint8)  # no demo place is purple
-
-    class PurpleCamera:
-        name = "purple"
-
-        def open(self): ...
-        def read(self):
-            return purple
-
-        def close(self): ...
-
     audio = PacedAudio(
         [Clip("coffee", synth_window("coffee", np.random.default_rng(3)))],
         DEMO_RATE,
@@ -316,7 +322,7 @@ def test_an_unknown_picture_is_asked_about_and_labelled_into_the_library(tmp_pat
     )
     engine = Engine(
         audio=audio,
-        camera=PurpleCamera(),
+        camera=ShowingCamera(lambda: purple),
         acoustic=acoustic,
         visual=visual,
         clock=clock,
@@ -485,21 +491,13 @@ def test_silence_names_no_place_asks_nothing_and_never_moves_the_arm():
     audio = PacedAudio(
         [Clip("silence", silence), Clip("coffee", coffee)], DEMO_RATE, realtime=False, clock=clock
     )
-    shots = iter(range(10**6))
-
-    class CoffeeCamera:  # the coffee shop's pictures all along
-        name = "coffee camera"
-
-        def open(self): ...
-        def read(self):
-            return synth_picture("coffee", np.random.default_rng([6, next(shots)]))
-
-        def close(self): ...
-
+    shots = iter(range(10**6))  # the coffee shop's pictures all along
     try:
         engine = Engine(
             audio=audio,
-            camera=CoffeeCamera(),
+            camera=ShowingCamera(
+                lambda: synth_picture("coffee", np.random.default_rng([6, next(shots)]))
+            ),
             acoustic=acoustic,
             visual=visual,
             clock=clock,
