@@ -4,7 +4,8 @@ picture, enter a pose, teach a second scene, train (the error falls), test the l
 from __future__ import annotations
 
 import pytest
-from textual.widgets import DataTable, Input, Sparkline
+from textual import events
+from textual.widgets import ContentSwitcher, DataTable, Input, Sparkline
 
 from servant_tui.app import ServantApp
 from servant_tui.screens.teach import TeachScreen
@@ -127,3 +128,32 @@ async def test_enter_records_window_after_window_from_the_keyboard(tmp_path, mon
             await settle(pilot, lambda: not screen.query_one("#record").disabled)
             await pilot.press("enter")
             await settle(pilot, lambda k=k: screen.windows == k, tries=400)
+
+
+async def test_keys_typed_in_a_burst_after_a_step_change_reach_the_step_shown(
+    tmp_path, monkeypatch
+):
+    """Keys arrive from a terminal in a burst: Ctrl-N to the pose step, then an angle at once.
+    The app forwarded the digits to the focused control before Ctrl-N had bubbled up to the
+    screen's binding, and the focus moved to the pose step only after the next refresh: the
+    digits went to the hidden *Take picture* (a pose went unsaved in a tmux walk)."""
+    monkeypatch.setenv("SERVANT_DATA_DIR", str(tmp_path / "data"))
+    monkeypatch.setenv("SERVANT_CONFIG_DIR", str(tmp_path / "config"))
+    engine = ReplayEngine(window_source=noise_recording(12.0, 500.0, seed=3), audio_rate=RATE)
+    app = ServantApp(engine, library_root=tmp_path / "library")
+    async with app.run_test(size=(120, 40)) as pilot:
+        await settle(pilot, lambda: engine.started.is_set())
+        await pilot.press("t")
+        await settle(pilot, lambda: isinstance(app.screen, TeachScreen))
+        screen = app.screen
+        await type_into(pilot, "#new-scene", "CoffeeScene")
+        await pilot.press("enter")
+        screen.go("pictures")
+        await pilot.pause()
+        # As the terminal driver does: every key posted before any is handled.
+        for key, char in (("ctrl+n", None), ("4", "4"), ("2", "2")):
+            app.post_message(events.Key(key, char))
+        await pilot.pause(0.5)
+        assert screen.query_one(ContentSwitcher).current == "pose"
+        first_joint = screen.query_one("#pose-form Input", Input)
+        assert first_joint.value == "42", f"the digits went to {screen.focused!r}"

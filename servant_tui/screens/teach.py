@@ -89,8 +89,9 @@ STATUS_OF_WORK = {
 class TeachScreen(ReportsWorkerErrors, Screen[None]):
     BINDINGS = [
         Binding("escape", "app.pop_screen", "Back"),
-        Binding("ctrl+n", "step(1)", "Next"),
-        Binding("ctrl+b", "step(-1)", "Previous"),
+        # Priority: the app runs the step change before it forwards the next key of a burst.
+        Binding("ctrl+n", "step(1)", "Next", priority=True),
+        Binding("ctrl+b", "step(-1)", "Previous", priority=True),
         Binding("delete", "remove_sample", "Remove sample", show=False),
         *HELP_AND_QUIT,
     ]
@@ -222,29 +223,37 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
 
     @on(OptionList.OptionHighlighted, "#steps")
     def _step_chosen(self, event: OptionList.OptionHighlighted) -> None:
-        self.query_one(ContentSwitcher).current = STEPS[event.option_index][0]
-        self.call_after_refresh(self._focus_in_step)
+        self._show(event.option_index)
 
-    def _focus_in_step(self) -> None:
-        """Keep focus on the steps list or in the step shown; focus left on a control of a hidden
-        step moves to the shown step's first control, so Enter acts on what the user sees."""
-        step = self.query_one(ContentSwitcher).visible_content
+    def _show(self, index: int) -> None:
+        """Step `index` shown, and the focus in it at once. Keys arrive from a terminal in a
+        burst: those typed right after a step change (Ctrl-N, then an angle) went to the hidden
+        step's control while the focus waited (`Widget.focus` is deferred, and the focus chain
+        is in layout order only after the next refresh). The focus stays on the steps list or
+        on a control of the step shown; else it goes to the step's first control as composed,
+        so Enter acts on what the user sees."""
+        switcher = self.query_one(ContentSwitcher)
+        switcher.current = STEPS[index][0]
+        step = switcher.visible_content
         focused = self.focused
         if step is None or (focused is not None and focused.id == "steps"):
             return
         if focused is not None and step in focused.ancestors:
             return
-        for widget in self.focus_chain:
-            if step in widget.ancestors:
-                widget.focus()
-                return
+        first = next((w for w in step.query("*") if w.focusable), None)
+        if first is not None:
+            self.set_focus(first)
 
     def go(self, step: str) -> None:
-        self.query_one("#steps", OptionList).highlighted = [s for s, _ in STEPS].index(step)
+        index = [s for s, _ in STEPS].index(step)
+        self.query_one("#steps", OptionList).highlighted = index
+        self._show(index)
 
     def action_step(self, delta: int) -> None:
         steps = self.query_one("#steps", OptionList)
-        steps.highlighted = min(max((steps.highlighted or 0) + delta, 0), len(STEPS) - 1)
+        index = min(max((steps.highlighted or 0) + delta, 0), len(STEPS) - 1)
+        steps.highlighted = index
+        self._show(index)
 
     def _need_scene(self) -> str:
         if self.scene is None:
