@@ -77,3 +77,5 @@ async def test_the_pose_step_reads_lists_and_removes_samples(tmp_path, arm):
         await pilot.click("#again")
         await pilot.pause()
         assert values(screen) == {"shoulder": "", "elbow": "", "gripper": ""}
+        # another scene is a new one: its name is typed next, not picked among the known
+        assert screen.focused is screen.query_one("#new-scene")

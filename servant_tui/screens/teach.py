@@ -506,6 +506,8 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
         self.query_one("#new-scene", Input).value = ""
         self.query_one("#known", Select).set_options((s, s) for s in self.known_scenes())
         self.go("scene")
+        # Another scene is a new one: its name is typed next (the known scenes came first)
+        self.set_focus(self.query_one("#new-scene", Input))
 
     # -- 5 train ----------------------------------------------------------------------------------
 
