@@ -38,3 +38,25 @@ async def test_a_camera_and_microphone_saved_in_settings_open_without_a_restart(
         await settle(pilot, lambda: "camera ✓" in bar(app) and "microphone ✓" in bar(app))
         assert engine.take_picture().shape == (240, 320, 3)  # a frame of the video
         assert engine.audio_rate > 0
+
+
+async def test_a_camera_changed_to_another_that_fails_says_the_new_one(tmp_path):
+    """The status line named the old camera (`camera 0: no such camera`) after the user chose
+    another that failed too: a fault was said once per device, whatever the device became."""
+    save_settings(Settings(camera=str(tmp_path / "none.avi")))
+    engine = build_run_engine(build_parser().parse_args(["run", "--no-mic"]))
+    app = ServantApp(engine, library_root=tmp_path / "library")
+    async with app.run_test(size=(120, 40)) as pilot:
+
+        def camera() -> str:
+            status = engine.status.get("camera")
+            return "" if status is None else status.message
+
+        await settle(pilot, lambda: "none.avi" in camera())
+        await pilot.press("s")
+        await settle(pilot, lambda: isinstance(app.screen, SettingsScreen))
+        app.screen.query_one("#camera", Input).value = str(tmp_path / "empty" / "frame_%02d.png")
+        await pilot.press("ctrl+s")
+        await settle(pilot, lambda: "frame_%02d.png" in camera())
+        assert not engine.status["camera"].ok
+        assert "camera ✗" in bar(app)

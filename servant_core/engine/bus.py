@@ -65,6 +65,11 @@ class EventBus:
         self._status[device] = status
         self.emit(status)
 
+    def forget(self, device: str) -> None:
+        """The device was replaced (another one chosen in Settings): its next state is said,
+        even a fault like the last one's."""
+        self._status.pop(device, None)
+
     def error(self, message: str) -> None:
         """Emit an ErrorEvent the first time this message occurs."""
         if message in self._reported_errors:

@@ -110,6 +110,7 @@ class Hearing:
         """Listen to `source` from now on (another microphone chosen in Settings)."""
         self.close()
         self.source = source
+        self.bus.forget("microphone")
         self.open()
 
     def reopen_if_due(self, t: float) -> None:
@@ -198,6 +199,7 @@ class Sight:
         with self._lock:
             self.source.close()
             self.source = source
+            self.bus.forget("camera")
             self._open()
 
     def grab(self, t: float) -> np.ndarray | None:
