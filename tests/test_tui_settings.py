@@ -128,3 +128,17 @@ async def test_a_channel_that_is_not_a_whole_number_is_one_line(tmp_path, config
         await settle(pilot, lambda: app._notifications)
         assert "elbow channel: '1.5' is not a whole number" in list(app._notifications)[0].message
     assert not config.exists()
+
+
+async def test_the_form_opens_on_the_audio_input_so_typing_goes_into_it(tmp_path, config):
+    """README step 1 goes through the fields in order; the scroll view had the focus, and what
+    a newcomer typed first went nowhere."""
+    from servant_tui.screens.settings import SettingsScreen
+
+    app = app_over(tmp_path)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await pilot.press("s")
+        await settle(pilot, lambda: isinstance(app.screen, SettingsScreen))
+        await pilot.press(*"pulse", "tab", *"cam.avi")
+        assert app.screen.query_one("#audio_device", Input).value == "pulse"
+        assert app.screen.query_one("#camera", Input).value == "cam.avi"

@@ -63,6 +63,9 @@ class SettingsScreen(Screen[None]):
         Binding("ctrl+s", "save", "Save"),
         *HELP_AND_QUIT,
     ]
+    # The form opens on its first field, the audio input: README step 1 goes through the fields
+    # in order (the scroll view took the focus, and what the user typed first went nowhere)
+    AUTO_FOCUS = f"#{DEVICE_FIELDS[0][0]}"
 
     def compose(self) -> ComposeResult:
         from servant_core.settings import PROTOCOLS, load_settings
