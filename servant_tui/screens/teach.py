@@ -20,6 +20,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Grid, Horizontal, Vertical
 from textual.screen import Screen
+from textual.widget import Widget
 from textual.widgets import (
     Button,
     ContentSwitcher,
@@ -199,13 +200,16 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
         self.query_one("#predictions", DataTable).add_columns("scene", *self.joints())
         self.query_one("#steps", OptionList).highlighted = 0
         self.set_interval(0.1, self._tick_recording, pause=False)
-        self.call_after_refresh(self._focus_first_answer)
+        # Now, not after a refresh: a name typed at once must not go to the steps list
+        self.set_focus(self._first_control(self.query_one("#scene")))
 
-    def _focus_first_answer(self) -> None:
-        """Teach mode opens where the first answer is typed (README step 2: "press t, name it"):
-        the new scene's name, or the known scenes when there are some. With the focus on the
-        steps list, a name typed at once went nowhere."""
-        self.query_one("#known" if self.known_scenes() else "#new-scene").focus()
+    def _first_control(self, step: Widget) -> Widget | None:
+        """Where a step's first answer is typed: for the scene (README step 2: "press t, name
+        it"), the new scene's name, or the known scenes when there are some; else the step's
+        first control in the order it was composed (what the user reads first)."""
+        if step.id == "scene":
+            return self.query_one("#known" if self.known_scenes() else "#new-scene")
+        return next((w for w in step.query("*") if w.focusable), None)
 
     def sample_senses(self) -> list[str]:
         """The engine's sample senses (motion, ambient): recorded with the sound."""
@@ -240,7 +244,7 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
             return
         if focused is not None and step in focused.ancestors:
             return
-        first = next((w for w in step.query("*") if w.focusable), None)
+        first = self._first_control(step)
         if first is not None:
             self.set_focus(first)
 
