@@ -11,21 +11,21 @@ from typing import Any, BinaryIO, TypeVar
 import numpy as np
 import soundfile as sf
 
+from servant_core.choices import DEFAULT_RATE as DEFAULT_RATE  # the audio's names, kept light
+from servant_core.choices import DEFAULT_WINDOW_SECONDS as DEFAULT_WINDOW_SECONDS
+from servant_core.choices import MAX_RATE as MAX_RATE
+from servant_core.choices import MAX_WINDOW_SECONDS as MAX_WINDOW_SECONDS
+from servant_core.choices import MIN_RATE as MIN_RATE
+from servant_core.choices import MIN_WINDOW_SECONDS as MIN_WINDOW_SECONDS
 from servant_core.errors import ServantError
+from servant_core.senses import AUDIO_SUFFIXES as AUDIO_SUFFIXES
 from servant_core.storage import atomic_write_bytes, open_regular_file, os_reason
 
-AUDIO_SUFFIXES = (".wav", ".flac", ".ogg", ".mp3")
-DEFAULT_RATE = 44100
-DEFAULT_WINDOW_SECONDS = 5.0
-# What a recording or a model may claim. Real recordings are 8 kHz (telephone) to 192 kHz
-# (studio); a header outside that is damaged. Ten minutes keeps the decoded mono copy and its
-# resampled copy of a 192 kHz file well under a gigabyte; longer recordings can be cut up.
-MIN_RATE = 8000
-MAX_RATE = 192000
+# What a recording or a model may claim (rates, window lengths: in `choices`). Ten minutes keeps
+# the decoded mono copy and its resampled copy of a 192 kHz file well under a gigabyte; longer
+# recordings can be cut up.
 MAX_CHANNELS = 16
 MAX_RECORDING_SECONDS = 600.0
-MIN_WINDOW_SECONDS = 0.5
-MAX_WINDOW_SECONDS = 60.0
 BLOCK_FRAMES = 1 << 16
 T = TypeVar("T")
 # Full scale is ±1. A float file may go beyond it (a mix not normalised), but not a thousand

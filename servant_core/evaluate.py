@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 from sklearn.metrics import confusion_matrix
 
+from servant_core.choices import DEFAULT_SHOTS, EVAL_PROTOCOLS, IMAGE_TRAIN_FRACTION
 from servant_core.errors import ServantError
 from servant_core.events import Decision
 from servant_core.fusion import POLICIES, FusionConfig, FusionNet, LearnedFusion, scene_line
@@ -54,13 +55,11 @@ from servant_core.recognisers import (
 from servant_core.recognisers.background import kept_out
 from servant_core.recognisers.base import open_predict, open_probabilities
 
-PROTOCOLS = ("temporal", "recording", "source", "fewshot")
+PROTOCOLS = EVAL_PROTOCOLS
 # For a library taught in the app, 5 s at a time: `temporal` where recordings are long enough to
 # split, else `recording` (leave one out: each recording is one sample). The result names which.
 TAUGHT = "taught"
-DEFAULT_SHOTS = (1, 2, 3, 5, 10)
 TRAIN_FRACTION = 0.6
-IMAGE_TRAIN_FRACTION = 0.7
 LOG_EPS = 1e-15
 
 

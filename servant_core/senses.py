@@ -17,8 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from servant_core.audio import AUDIO_SUFFIXES
-
+AUDIO_SUFFIXES = (".wav", ".flac", ".ogg", ".mp3")
 PICTURE_SUFFIXES = (".png", ".jpg", ".jpeg")
 # The scene a recogniser names when it knows none: never a scene folder's name. It lives here,
 # below both the scene library and the recognisers, so that the library need not import the

@@ -11,12 +11,14 @@ import time
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import TYPE_CHECKING, Any, BinaryIO
 
-import numpy as np
 import platformdirs
 
 from servant_core.errors import ServantError
+
+if TYPE_CHECKING:  # numpy loads with the one function that needs it: settings stay light
+    import numpy as np
 
 APP_NAME = "servant"
 
@@ -120,6 +122,8 @@ def atomic_write_json(path: str | os.PathLike[str], obj: Any) -> Path:
 
 def atomic_save_npz(path: str | os.PathLike[str], arrays: dict[str, np.ndarray]) -> Path:
     """Save arrays as an uncompressed `.npz`, atomically. Object arrays are refused (no pickle)."""
+    import numpy as np
+
     for name, array in arrays.items():
         if np.asarray(array).dtype == object:
             raise TypeError(f"array {name!r} has dtype object, which would need pickle")

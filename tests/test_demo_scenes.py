@@ -21,6 +21,7 @@ from servant_core.demo.scenes import (
 )
 from servant_core.engine import build_demo_engine
 from servant_core.events import AcousticPrediction, Decision, VisualPrediction
+from servant_core.recognisers.base import answers, open_predict, open_probabilities
 from tests.conftest import servant
 
 
@@ -166,6 +167,24 @@ def test_the_demos_start_up_reports_its_progress():
         (len(SCENES) + FIT_STEPS, total),
         (total, total),
     ]
+
+
+def test_answers_at_once_are_the_answers_one_by_one():
+    """What the engine asks of each window and picture (`answers`: one trip into the
+    recogniser's space) is what `open_predict`, `confidence` and `open_probabilities` say."""
+    acoustic, visual = train_demo_recognisers(seed=0, paper=False)
+    windows, _, pictures, _ = training_set(seed=7, windows_per_scene=2, pictures_per_scene=2)
+    silence_and_noise = np.stack(
+        [np.zeros_like(windows[0]), np.random.default_rng(3).standard_normal(len(windows[0]))]
+    ).astype(np.float32)
+    for model, X in (
+        (acoustic, acoustic.featurize(np.concatenate([windows, silence_and_noise]))),
+        (visual, visual.featurize(pictures)),
+    ):
+        names, confidences, probabilities = answers(model, X)
+        assert list(names) == list(open_predict(model, X))
+        np.testing.assert_array_equal(confidences, model.confidence(X))
+        np.testing.assert_array_equal(probabilities, open_probabilities(model, X))
 
 
 @pytest.mark.parametrize("started_after", [0.0, 3.3, 17.0])

@@ -25,7 +25,7 @@ from typing import Any
 from servant_core.errors import ServantError
 
 RECOGNITION, ARM, LIVE, SENSORS = (
-    f"servant_core.cli.{name}" for name in ("recognition", "arm", "live", "sensors")
+    f"servant_core.cli.{name}" for name in ("recognition_options", "arm", "live", "sensors")
 )
 # Each command: the module that registers its options, and its line in `servant --help`.
 SUBCOMMANDS = {
@@ -157,6 +157,18 @@ def build_parser(lazy: bool = True) -> argparse.ArgumentParser:
         for command in listed.values():
             command.fill()
     return parser
+
+
+def later(module: str, name: str) -> Callable[[argparse.Namespace], int]:
+    """The handler `name` of `module`, imported when the command runs: a command's options and
+    its `--help` need none of the libraries its work loads."""
+
+    def handler(args: argparse.Namespace) -> int:
+        run: Callable[[argparse.Namespace], int] = getattr(importlib.import_module(module), name)
+        return run(args)
+
+    handler.__name__ = name
+    return handler
 
 
 def emit(args: argparse.Namespace, payload: Any, text: str) -> None:

@@ -14,27 +14,16 @@ import dataclasses
 import json
 import sys
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from servant_core.cli import terminal_text
 from servant_core.cli.options import finite_float, sample_rate
-from servant_core.engine import Engine, LiveSettings, build_demo_engine, build_live_engine
 from servant_core.errors import ServantError
-from servant_core.event_text import arm_text, confidence_text, place
-from servant_core.events import (
-    AcousticPrediction,
-    ArmState,
-    Decision,
-    DeviceStatus,
-    ErrorEvent,
-    Event,
-    Notice,
-    SensePrediction,
-    UnknownScene,
-    VisualPrediction,
-)
 from servant_core.senses import SAMPLE_SENSES
-from servant_core.storage import default_model_file
+
+if TYPE_CHECKING:  # the engine and its libraries load when a command runs, not for its --help
+    from servant_core.engine import Engine, LiveSettings
+    from servant_core.events import Event
 
 RUN_DESCRIPTION = """Recognise the scene from the live microphone and camera and, once armed, move
 the arm to the pose taught for it. Devices, the arm's port and joints, the fusion windows and the
@@ -47,7 +36,7 @@ in the demo goes to a temporary folder, deleted when it ends."""
 
 
 def register(subparsers: Any) -> None:
-    from servant_core.fusion import DEFAULT_POLICY, POLICIES
+    from servant_core.choices import DEFAULT_POLICY, POLICY_NAMES
     from servant_core.settings import PROTOCOLS
 
     run = subparsers.add_parser(
@@ -94,7 +83,7 @@ def register(subparsers: Any) -> None:
     )
     run.add_argument(
         "--policy",
-        choices=sorted(POLICIES),
+        choices=sorted(POLICY_NAMES),
         default=DEFAULT_POLICY,
         help="fusion: `sequential` is the paper's 30 s / 20 s rule; `learned` is a small neural "
         "net over every sense (trained with the model; without one it acts as `parallel`)",
@@ -116,7 +105,7 @@ def register(subparsers: Any) -> None:
     )
     demo.add_argument(
         "--policy",
-        choices=sorted(POLICIES),
+        choices=sorted(POLICY_NAMES),
         help="fusion (default: parallel; sequential with --paper); `learned` teaches its net on "
         "the demo's scenes first and shows which senses each decision leaned on",
     )
@@ -152,6 +141,8 @@ def run_live(args: argparse.Namespace) -> int:
 def build_run_engine(args: argparse.Namespace | None = None) -> Engine:
     """The live engine for `servant run ARGS` (None: `servant` alone), armed if `--arm` was given;
     ServantError when the settings or the model cannot be read, or `--arm` finds no arm."""
+    from servant_core.engine import build_live_engine
+
     engine = build_live_engine(live_settings(args))
     if args is not None and args.arm:
         try:
@@ -169,7 +160,9 @@ def live_settings(args: argparse.Namespace | None = None) -> LiveSettings:
     Without `--model`, the model that teach mode and the library screen last saved is loaded
     (`default_model_file()`, if there is one yet) and retrains and fold-ins are saved back to it.
     """
+    from servant_core.engine import LiveSettings
     from servant_core.settings import load_settings
+    from servant_core.storage import default_model_file
 
     user = load_settings()
     default = default_model_file()
@@ -213,6 +206,7 @@ def _sensors(args: argparse.Namespace, board: dict[str, str]) -> dict[str, str]:
 
 def run_demo(args: argparse.Namespace) -> int:
     from servant_core.demo.space import throwaway_space
+    from servant_core.engine import build_demo_engine
 
     with throwaway_space() as space:
         engine = build_demo_engine(
@@ -256,6 +250,19 @@ def _printer(as_json: bool) -> Any:
 
 def _event_line(event: Event) -> str | None:
     """The line a person reads for an event, or None for events too frequent to print."""
+    from servant_core.event_text import arm_text, confidence_text, place
+    from servant_core.events import (
+        AcousticPrediction,
+        ArmState,
+        Decision,
+        DeviceStatus,
+        ErrorEvent,
+        Notice,
+        SensePrediction,
+        UnknownScene,
+        VisualPrediction,
+    )
+
     at = f"[{event.t:7.2f}]"
     if isinstance(event, (Decision, AcousticPrediction, VisualPrediction)):
         confidence = confidence_text(event.confidence, event.confidence_unit)

@@ -11,7 +11,7 @@ import argparse
 import math
 from collections.abc import Callable
 
-from servant_core.audio import MAX_RATE, MAX_WINDOW_SECONDS, MIN_RATE, MIN_WINDOW_SECONDS
+from servant_core.choices import MAX_RATE, MAX_WINDOW_SECONDS, MIN_RATE, MIN_WINDOW_SECONDS
 
 
 def finite_float(low: float, high: float) -> Callable[[str], float]:

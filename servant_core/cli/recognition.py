@@ -1,4 +1,7 @@
-"""`servant train | predict | eval | table`: the paper's recognition pipeline, headless."""
+"""`servant train | predict | eval | table`: the paper's recognition pipeline, headless.
+
+Their options are registered by `servant_core.cli.recognition_options`, which loads no library;
+this module is imported when one of the commands runs."""
 
 from __future__ import annotations
 
@@ -11,22 +14,12 @@ from typing import Any, cast
 
 import numpy as np
 
-from servant_core.audio import (
-    DEFAULT_RATE,
-    DEFAULT_WINDOW_SECONDS,
-    SILENT_DBFS,
-    cut_windows,
-    is_silent,
-    read_audio,
-)
-from servant_core.cli import emit, one_line, options
+from servant_core.audio import SILENT_DBFS, cut_windows, is_silent, read_audio
+from servant_core.cli import emit, one_line
 from servant_core.engine import FRESH_METHODS, decision_unit
 from servant_core.engine.learning import library_fusion_net, refit_samples
 from servant_core.errors import ServantError
 from servant_core.evaluate import (
-    DEFAULT_SHOTS,
-    IMAGE_TRAIN_FRACTION,
-    PROTOCOLS,
     Said,
     evaluate_audio,
     evaluate_fusion,
@@ -41,15 +34,13 @@ from servant_core.evaluate import (
 )
 from servant_core.event_text import confidence_text, place
 from servant_core.features.rows import checked_rows, usable_rows
-from servant_core.fusion import DEFAULT_POLICY, POLICIES, FusionConfig, LearnedFusion
+from servant_core.fusion import FusionConfig, LearnedFusion
 from servant_core.fusion.elsewhere import place_probability
 from servant_core.library import SceneLibrary, featurize_recordings, read_picture, read_pictures
 from servant_core.modelfile import check_model_output, load_model_and_fusion, save_model
 from servant_core.progress import Progress
 from servant_core.recognisers import (
-    ACOUSTIC_METHODS,
     UNKNOWN,
-    VISUAL_METHODS,
     AcousticRecogniser,
     Recogniser,
     make_audio_recogniser,
@@ -59,223 +50,6 @@ from servant_core.recognisers.background import kept_out
 from servant_core.recognisers.base import knows_elsewhere, open_predict, open_probabilities
 from servant_core.senses import ROLE_SENSE, SAMPLE_SENSES
 from servant_core.storage import default_model_file
-
-
-def register(subparsers: argparse._SubParsersAction) -> None:
-    train = subparsers.add_parser("train")
-    train.add_argument("root", type=Path, help="scene library: ROOT/<scene>/<recordings, pictures>")
-    train.add_argument(
-        "-o",
-        "--output",
-        type=Path,
-        help="model file (default: the data dir's model.npz, which `servant` and `servant run` "
-        "load at start)",
-    )
-    _method_options(train)
-    _audio_options(train)
-    train.add_argument(
-        "--skip-bad",
-        action="store_true",
-        help="skip unreadable or damaged files (with a warning) instead of stopping",
-    )
-    train.add_argument(
-        "--learned-fusion",
-        action="store_true",
-        help="also train the learned fusion's net (for --policy learned) on the recognisers' "
-        "held-out opinions; slower: each recogniser is refitted once per fold",
-    )
-    _json_option(train)
-    train.set_defaults(handler=cmd_train)
-
-    predict = subparsers.add_parser("predict")
-    predict.add_argument("model", type=Path, help="model file from `servant train`")
-    predict.add_argument("--audio", type=Path, help="a recording: each window is recognised")
-    predict.add_argument("--image", type=Path, nargs="+", default=[], help="pictures, in order")
-    _fusion_options(predict)
-    _json_option(predict)
-    predict.set_defaults(handler=cmd_predict)
-
-    evaluate = subparsers.add_parser("eval")
-    senses = evaluate.add_subparsers(dest="sense", metavar="SENSE", required=True)
-    audio = senses.add_parser(
-        "audio", help="acoustic recognition: temporal, recording, source or fewshot protocol"
-    )
-    audio.add_argument("root", type=Path, help="training recordings (and test, without --test)")
-    audio.add_argument(
-        "--protocol",
-        choices=list(PROTOCOLS),
-        default="temporal",
-        help="temporal: the first 60%% of each recording trains; recording: leave one recording "
-        "out; source: leave one source out (the file name up to its first '-', or --groups); "
-        "fewshot: the first k windows of each recording train",
-    )
-    audio.add_argument(
-        "--groups",
-        type=Path,
-        metavar="FILE",
-        help="source protocol: the group of each recording, one a line: PATH GROUP (PATH "
-        "relative to ROOT); default: the file name up to its first '-'",
-    )
-    audio.add_argument(
-        "--test",
-        type=Path,
-        help="test recordings from another library: train on all of ROOT, test on all of TEST",
-    )
-    audio.add_argument(
-        "--shots",
-        type=_shots,
-        default=DEFAULT_SHOTS,
-        help="fewshot: comma-separated windows per recording that train "
-        f"(default: {','.join(map(str, DEFAULT_SHOTS))})",
-    )
-    audio.add_argument(
-        "--method",
-        choices=sorted(ACOUSTIC_METHODS),
-        default=FRESH_METHODS["audio"],
-        help="acoustic method (paper: the paper's FFT K-Means)",
-    )
-    audio.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
-    audio.add_argument(
-        "--min-recordings",
-        type=options.bounded_int(1, 10_000),
-        default=1,
-        metavar="N",
-        help="keep only the scenes with at least N recordings (default: %(default)s)",
-    )
-    _seeds_option(audio)
-    _audio_options(audio)
-    _json_option(audio)
-    audio.set_defaults(handler=cmd_eval_audio)
-    image = senses.add_parser("image", help="visual recognition: train library vs test library")
-    image.add_argument("root", type=Path, help="training pictures")
-    image.add_argument(
-        "--test", type=Path, help="test pictures (default: split ROOT by file order)"
-    )
-    image.add_argument(
-        "--split",
-        type=options.open_fraction,
-        default=IMAGE_TRAIN_FRACTION,
-        help="without --test: fraction of each scene's files (by name) that train",
-    )
-    image.add_argument(
-        "--method",
-        choices=sorted(VISUAL_METHODS),
-        default=FRESH_METHODS["image"],
-        help="visual method (paper: the paper's dominant colours)",
-    )
-    image.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
-    _seeds_option(image)
-    _json_option(image)
-    image.set_defaults(handler=cmd_eval_image)
-    fusion = senses.add_parser("fusion", help="fused decisions over paired windows and pictures")
-    fusion.add_argument("root", type=Path, help="library with recordings and pictures per scene")
-    _method_options(fusion)
-    fusion.add_argument("--scenes", help="comma-separated scenes to keep (default: all paired)")
-    _fusion_options(fusion)
-    fusion.add_argument(
-        "--drop-sense",
-        choices=("audio", "image"),
-        help="withhold this sense at test time (a broken microphone or camera)",
-    )
-    _seeds_option(fusion)
-    _json_option(fusion)
-    fusion.set_defaults(handler=cmd_eval_fusion)
-
-    table = subparsers.add_parser("table")
-    table.add_argument("library", type=Path, help="scene library with recordings and pictures")
-    table.add_argument("--test", type=Path, help="take the test recording and picture from here")
-    table.add_argument(
-        "--scenes", help="comma-separated scenes (default: all with sound and pictures)"
-    )
-    _method_options(table, paper=True)
-    _json_option(table)
-    table.set_defaults(handler=cmd_table)
-
-
-def _json_option(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--json", action="store_true", help="print JSON instead of text")
-
-
-def _method_options(parser: argparse.ArgumentParser, paper: bool = False) -> None:
-    """`--audio-method`, `--image-method`: the better methods by default (the engine's choice
-    for fresh models), the paper's for `table`, which reproduces the paper."""
-    parser.add_argument(
-        "--audio-method",
-        choices=sorted(ACOUSTIC_METHODS),
-        default="paper" if paper else FRESH_METHODS["audio"],
-        help="acoustic method (paper: the paper's FFT K-Means)",
-    )
-    parser.add_argument(
-        "--image-method",
-        choices=sorted(VISUAL_METHODS),
-        default="paper" if paper else FRESH_METHODS["image"],
-        help="visual method (paper: the paper's dominant colours)",
-    )
-
-
-def _seeds_option(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--seeds",
-        type=options.bounded_int(1, 100),
-        default=1,
-        help="repeat over random states 0..N-1 and report mean and spread (default: %(default)s, "
-        "the method's own random state)",
-    )
-
-
-def _shots(text: str) -> tuple[int, ...]:
-    try:
-        shots = tuple(int(part) for part in text.split(",") if part.strip())
-    except ValueError:
-        shots = ()
-    if not shots or min(shots) < 1:
-        raise argparse.ArgumentTypeError(
-            f"{text!r}: give whole numbers of windows, each at least 1 (e.g. 1,3,10)"
-        )
-    return shots
-
-
-def _audio_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--rate",
-        type=options.sample_rate,
-        help=f"model sample rate (Hz); default: the method's own ({DEFAULT_RATE} for paper)",
-    )
-    parser.add_argument(
-        "--window",
-        type=options.window_seconds,
-        default=DEFAULT_WINDOW_SECONDS,
-        help="window length (s)",
-    )
-
-
-def _fusion_options(parser: argparse.ArgumentParser) -> None:
-    defaults = FusionConfig()
-    parser.add_argument(
-        "--policy",
-        choices=sorted(POLICIES),
-        default=DEFAULT_POLICY,
-        help="sequential: the paper's (hear, then look); parallel: both senses at once; "
-        "learned: a small neural net over every sense's probabilities (parallel without one)",
-    )
-    parser.add_argument(
-        "--acoustic-window",
-        type=options.fusion_seconds,
-        default=defaults.acoustic_window_s,
-        help="seconds an acoustic prediction waits for pictures to agree",
-    )
-    parser.add_argument(
-        "--confirm-window",
-        type=options.fusion_seconds,
-        default=defaults.confirm_window_s,
-        help="seconds within which the agreeing pictures must fall",
-    )
-    parser.add_argument(
-        "--pictures",
-        type=options.picture_count,
-        default=defaults.pictures_needed,
-        help="agreeing pictures needed to detect a scene",
-    )
 
 
 def _fusion_config(args: argparse.Namespace) -> FusionConfig:
@@ -719,6 +493,3 @@ def cmd_table(args: argparse.Namespace) -> int:
     )
     emit(args, tables, format_tables(tables))
     return 0
-
-
-__all__ = ["register"]

@@ -75,7 +75,7 @@ from servant_core.fusion.elsewhere import elsewhere_mass, place_probability, ste
 from servant_core.fusion.smoothing import SceneSmoother
 from servant_core.library import SceneLibrary
 from servant_core.recognisers import FRESH_METHODS, UNKNOWN, Recogniser
-from servant_core.recognisers.base import knows_elsewhere, open_predict, open_probabilities
+from servant_core.recognisers.base import answers, knows_elsewhere
 from servant_core.senses import SAMPLE_SENSES, SENSES
 from servant_core.storage import data_dir
 
@@ -909,11 +909,9 @@ def _predict(recogniser: Recogniser, X: np.ndarray) -> tuple[str, float, dict[st
     """(scene or UNKNOWN, confidence, {scene: probability}) for a single featurized row;
     `UnusableWindow` when the row is not finite numbers."""
     checked_rows(X, f"{recogniser.sense} prediction")
-    scene = str(open_predict(recogniser, X)[0])
-    confidence = float(recogniser.confidence(X)[0])
-    probabilities = open_probabilities(recogniser, X)[0]
+    names, confidences, probabilities = answers(recogniser, X)
     return (
-        scene,
-        confidence,
-        {s: float(p) for s, p in zip(recogniser.scenes_, probabilities, strict=True)},
+        str(names[0]),
+        float(confidences[0]),
+        {s: float(p) for s, p in zip(recogniser.scenes_, probabilities[0], strict=True)},
     )

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from typing import Protocol
 
+from servant_core.choices import DEFAULT_POLICY
 from servant_core.events import Decision, FusionState
 from servant_core.fusion.learned import FusionNet, LearnedFusion
 from servant_core.fusion.parallel import ParallelFusion
@@ -35,9 +36,6 @@ POLICIES: dict[str, type] = {
     "learned": LearnedFusion,
 }
 
-# What `servant run`, `predict`, `eval fusion` and the app fuse with unless told otherwise (the
-# paper's own rule, `sequential`, is what `--paper` and `table` reproduce).
-DEFAULT_POLICY = "parallel"
 
 __all__ = [
     "DEFAULT_POLICY",

@@ -12,8 +12,8 @@ acoustic predictions are ignored, as in the paper, which does not listen while i
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
 
+from servant_core.choices import FusionConfig
 from servant_core.events import Decision, FusionState
 from servant_core.recognisers.base import UNKNOWN
 
@@ -26,14 +26,6 @@ def scene_line(scene: str | None) -> str:
         return NO_SCENE
     words = scene.replace("-", " ").replace("_", " ").split()
     return "".join(w[:1].upper() + w[1:] for w in words) + "Scene detected"
-
-
-@dataclass(frozen=True)
-class FusionConfig:
-    acoustic_window_s: float = 30.0
-    confirm_window_s: float = 20.0
-    pictures_needed: int = 3
-    picture_interval_s: float = 2.0
 
 
 class AcousticWindow(ABC):

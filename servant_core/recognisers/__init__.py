@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 from typing import Any, cast
 
+from servant_core.choices import FRESH_AUDIO_METHOD, FRESH_IMAGE_METHOD
 from servant_core.errors import ServantError
 from servant_core.recognisers.base import UNKNOWN, AcousticRecogniser, Recogniser
 from servant_core.recognisers.bovw import BovwVisualRecogniser
@@ -57,10 +58,10 @@ def make_audio_recogniser(method: str, **params: Any) -> AcousticRecogniser:
 
 
 # What a retrain fits for a sense that has no recogniser yet, and what `servant train` and the
-# demo use: the methods beyond the paper that lead on every protocol (docs/research.md).
+# demo use (`choices`).
 FRESH_METHODS = {
-    "audio": "kmeans-encoder",
-    "image": "fisher-bovw",
+    "audio": FRESH_AUDIO_METHOD,
+    "image": FRESH_IMAGE_METHOD,
     **{name: SAMPLE_METHOD for name in SAMPLE_SENSES},
 }
 

@@ -185,6 +185,20 @@ def open_predict(recogniser: Any, X: np.ndarray) -> np.ndarray:
     return names.astype(str)
 
 
+def answers(recogniser: Any, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(`open_predict`, `confidence`, `open_probabilities`) of rows `X`: in one pass where the
+    recogniser answers all three at once (its `answers`), else asked one by one."""
+    at_once = getattr(recogniser, "answers", None)
+    if at_once is not None:
+        answered: tuple[np.ndarray, np.ndarray, np.ndarray] = at_once(X)
+        return answered
+    return (
+        open_predict(recogniser, X),
+        np.asarray(recogniser.confidence(X), dtype=float),
+        open_probabilities(recogniser, X),
+    )
+
+
 def knows_elsewhere(recogniser: Any) -> bool:
     """Whether the recogniser's `open_probabilities` leave room for somewhere else."""
     return bool(getattr(recogniser, "knows_elsewhere", False))

@@ -58,10 +58,23 @@ class LinearHeadAnswers:
     def predict(self, X: np.ndarray) -> np.ndarray:
         """The likeliest taught place; `UNKNOWN` where the row is far from every place taught
         (the novelty head). Whether it is more likely somewhere else: `open_predict`."""
-        D = self._space(X)
+        return self._names(self._space(X)).astype(str)
+
+    def _names(self, D: np.ndarray) -> np.ndarray:
         names = np.asarray(self.scenes_, dtype=object)[np.argmax(self._proba(D), axis=1)]
         names[self.novelty_head_.is_unknown(D)] = UNKNOWN
-        return names.astype(str)
+        return names
+
+    def answers(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`open_predict`, `confidence` and `open_probabilities` of the same rows, from one trip
+        into the space: the trip is most of what a window or a picture costs, and the live engine
+        asks all three of each."""
+        D = self._space(X)
+        open_p = np.asarray(self._open_proba(D), dtype=float)
+        names = self._names(D)
+        if self.knows_elsewhere:
+            names[open_p.sum(axis=1) <= 0.5] = UNKNOWN
+        return names.astype(str), 100.0 * np.max(open_p, axis=1), open_p
 
     def confidence(self, X: np.ndarray) -> np.ndarray:
         """The probability of the likeliest taught place and not somewhere else, in percent."""
