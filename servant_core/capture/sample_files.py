@@ -275,9 +275,8 @@ class PacedSamples(PacedAudio):
     def read(self, timeout: float) -> np.ndarray | None:
         if self.follow is not None and not self.realtime:
             due = int(math.floor(self.follow() * self.rate + 1e-9)) - self._produced
-            if due < self.block:  # the followed source has not got there yet
-                if timeout > 0:  # 0 asks for what is there: a sleep(0) would only yield the CPU
-                    time.sleep(min(timeout, 0.001))
+            if due < self.block:
+                time.sleep(min(timeout, 0.001))  # the followed source has not got there yet
                 return None
         return super().read(timeout)
 
