@@ -44,6 +44,9 @@ def run_tui(engine_factory: Callable[[], Any], mode: str) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    from servant_core.threads import one_thread_pools
+
+    one_thread_pools()  # before numpy loads
     try:
         return _main(argv)
     except KeyboardInterrupt:  # before a command's own handling of it (importing, parsing)

@@ -8,8 +8,12 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
-import pytest
+from servant_core.threads import one_thread_pools
+
+one_thread_pools()  # as in the `servant` command, before numpy loads: the engines tested here too
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 
