@@ -120,6 +120,27 @@ def test_the_action_learner_refuses_a_file_that_is_not_one(tmp_path: Path) -> No
     learner.save(tmp_path / "fresh.npz")  # its own kind: replaced
 
 
+def _taught_learner() -> ActionLearner:
+    records = [
+        TeachRecord(scene, label_scores(scene, ["cafe", "gym"]), {"shoulder": angle}, 0.0)
+        for scene, angle in [("cafe", 10.0), ("gym", 80.0)] * 2
+    ]
+    return ActionLearner(max_iter=20).fit(records)
+
+
+def test_a_model_and_an_action_learner_never_replace_each_other(lib: Path, tmp_path: Path) -> None:
+    """Both are Servant `.npz` files: `teach --learner model.npz` once replaced a trained model
+    with a learner, and `train -o learner.npz` the taught learner with a model."""
+    model, learner = tmp_path / "model.npz", tmp_path / "learner.npz"
+    assert train(lib, model).code == 0
+    _taught_learner().save(learner)
+    model_bytes, learner_bytes = model.read_bytes(), learner.read_bytes()
+    with pytest.raises(ServantError, match="not an action learner file"):
+        _taught_learner().save(model)
+    assert_refused(train(lib, learner), "learner.npz", "not a model file")
+    assert model.read_bytes() == model_bytes and learner.read_bytes() == learner_bytes
+
+
 def test_a_save_removes_the_temporaries_a_killed_save_left(tmp_path: Path) -> None:
     """Issue 24 item 8: a kill during a save left `.model.npz.XXXXXXXX.tmp`, and nothing ever
     removed it. The next save of that file removes those an hour old; a write going on now

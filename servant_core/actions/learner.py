@@ -35,7 +35,7 @@ from servant_core.storage import (
     atomic_save_npz,
     check_replaceable,
     data_dir,
-    is_servant_npz,
+    is_servant_npz_of,
     os_reason,
 )
 
@@ -257,7 +257,7 @@ class ActionLearner:
             "history": self.history_,
             "n_records": self.n_records_,
         }
-        check_replaceable(path, "action learner file", is_servant_npz)
+        check_replaceable(path, "action learner file", is_servant_npz_of(FORMAT))
         arrays = {f"coef_{i}": w for i, w in enumerate(self.coefs_)}
         arrays |= {f"intercept_{i}": b for i, b in enumerate(self.intercepts_)}
         arrays |= {
