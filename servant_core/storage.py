@@ -168,6 +168,21 @@ def check_replaceable(
             f"{path}: exists and is not {_article(what)}, so it is not overwritten; "
             "move it away or choose another name"
         )
+    if exists and _read_only(path):
+        raise ServantError(
+            f"{path}: is read-only, so it is not overwritten; make it writable "
+            "(chmod u+w) or choose another name"
+        )
+
+
+def _read_only(path: Path) -> bool:
+    """A file this user may not write, or whose owner made it read-only (`chmod a-w`): a
+    replacement by rename never asks the file itself, so its mode is asked here (as root too)."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return False
+    return not mode & stat.S_IWUSR or not os.access(path, os.W_OK)
 
 
 # A model's header is at most a million characters (4 bytes each in the array); more is no header.

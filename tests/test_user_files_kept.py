@@ -105,6 +105,23 @@ def test_a_model_written_over_keeps_its_permissions(lib: Path, tmp_path: Path) -
     assert stat.S_IMODE(model.stat().st_mode) == 0o640
 
 
+def test_a_read_only_model_or_learner_is_not_written_over(lib: Path, tmp_path: Path) -> None:
+    """`chmod a-w model.npz` protects a model: replacing it by rename never asked the file, so
+    `train -o` wrote over it (and kept it read-only)."""
+    model, learner = tmp_path / "model.npz", tmp_path / "learner.npz"
+    assert train(lib, model).code == 0
+    _taught_learner().save(learner)
+    for path in (model, learner):
+        path.chmod(0o444)
+    model_bytes, learner_bytes = model.read_bytes(), learner.read_bytes()
+    assert_refused(train(lib, model), "model.npz", "read-only", "chmod u+w")
+    with pytest.raises(ServantError, match="read-only"):
+        _taught_learner().save(learner)
+    assert model.read_bytes() == model_bytes and learner.read_bytes() == learner_bytes
+    model.chmod(0o644)
+    assert train(lib, model).code == 0
+
+
 def test_the_action_learner_refuses_a_file_that_is_not_one(tmp_path: Path) -> None:
     records = [
         TeachRecord(scene, label_scores(scene, ["cafe", "gym"]), {"shoulder": angle}, 0.0)
