@@ -47,7 +47,9 @@ def test_teach_records_as_a_special_file_are_one_line(tmp_path: Path, kind: str)
         "teach", "--records", str(records), "--learner", str(tmp_path / "l.npz"), timeout=30
     )
     assert_clear(outcome, seconds=30)
-    assert outcome.code == 2 and "not a regular file" in outcome.err
+    # a link is refused as the place to write the records, before it is read
+    assert outcome.code == 2
+    assert ("not a regular file" if kind == "fifo" else "symbolic link") in outcome.err
 
 
 @pytest.mark.parametrize("kind", SPECIAL)

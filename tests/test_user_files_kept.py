@@ -7,10 +7,13 @@ model written over keeps its permissions.
 
 from __future__ import annotations
 
+import io
 import os
 import stat
+import sys
 import time
 from pathlib import Path
+from unittest import mock
 
 import pytest
 
@@ -19,7 +22,7 @@ from servant_core.actions.records import TeachRecord, label_scores
 from servant_core.errors import ServantError
 from servant_core.pty_port import PtyPort
 from servant_core.storage import atomic_write_bytes
-from tests.cli_harness import assert_clear, assert_refused, run_cli
+from tests.cli_harness import Outcome, assert_clear, assert_refused, run_cli
 from tests.test_cli_boundaries import SMALL_AUDIO, audio_library
 
 PRECIOUS = b"the user's own words\n"
@@ -156,6 +159,37 @@ def test_a_model_and_an_action_learner_never_replace_each_other(lib: Path, tmp_p
         _taught_learner().save(model)
     assert_refused(train(lib, learner), "learner.npz", "not a model file")
     assert model.read_bytes() == model_bytes and learner.read_bytes() == learner_bytes
+
+
+def teach(tmp_path: Path, records: Path, learner: Path, script: str) -> Outcome:
+    argv = ["teach", "--dry-run", "--records", str(records), "--learner", str(learner)]
+    with mock.patch.object(sys, "stdin", io.StringIO(script)):
+        return run_cli(*argv, "--iterations", "20")
+
+
+def test_teach_keeps_a_records_link_and_a_read_only_records_file(tmp_path: Path) -> None:
+    """`teach --records link.json` replaced the link with a file; a read-only record file was
+    written over; and a learner destination that would be refused was found only after the
+    whole session was taught (and its records written)."""
+    records, learner = tmp_path / "records.json", tmp_path / "learner.npz"
+    assert teach(tmp_path, records, learner, "cafe\n10\ngym\n80\n\n").code == 0
+    before = records.read_bytes()
+    link = tmp_path / "link.json"
+    link.symlink_to(records)
+    outcome = teach(tmp_path, link, tmp_path / "l2.npz", "office\n30\n\n")
+    assert_refused(outcome, "link.json", "symbolic link")
+    assert link.is_symlink() and records.read_bytes() == before
+    records.chmod(0o444)
+    outcome = teach(tmp_path, records, tmp_path / "l3.npz", "office\n30\n\n")
+    assert_refused(outcome, "records.json", "read-only")
+    assert records.read_bytes() == before
+    records.chmod(0o644)
+    model = tmp_path / "model.npz"
+    model.write_bytes(PRECIOUS)
+    outcome = teach(tmp_path, records, model, "office\n30\n\n")
+    assert_refused(outcome, "model.npz", "not an action learner file")
+    assert "Scene label" not in outcome.out  # refused before the session
+    assert records.read_bytes() == before and model.read_bytes() == PRECIOUS
 
 
 def test_a_save_removes_the_temporaries_a_killed_save_left(tmp_path: Path) -> None:

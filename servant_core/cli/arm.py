@@ -12,10 +12,15 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TextIO
 
-from servant_core.actions.learner import ActionLearner, default_learner_path
+from servant_core.actions.learner import (
+    ActionLearner,
+    check_learner_output,
+    default_learner_path,
+)
 from servant_core.actions.records import (
     TeachRecord,
     append_record,
+    check_records_output,
     default_records_path,
     label_scores,
     load_records,
@@ -311,6 +316,9 @@ def run_teach(
     joint = settings.joint(args.joint).name if args.joint else settings.joints[0].name
     records_path = args.records or default_records_path()
     learner_path = args.learner or default_learner_path()
+    if not args.predict_only:  # before the session, not after what was taught in it
+        check_records_output(records_path)
+        check_learner_output(learner_path)
     link = _open_link(args, settings, session.out) if (args.port or args.dry_run) else None
     try:
         if link is not None:
