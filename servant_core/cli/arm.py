@@ -259,7 +259,8 @@ def _say_moves(emulator: ServoEmulator, joints: list[Joint], stop: threading.Eve
             if t > newest:
                 newest, pending[channel] = t, value
         if pending and emulator.clock() - newest >= MOVE_QUIET_S:
-            print(f"received a move: {_targets_text(emulator, joints, pending)}", flush=True)
+            text = _targets_text(emulator, joints, pending)  # joint names from the settings
+            print(terminal_text(f"received a move: {text}"), flush=True)
             pending = {}
 
 
