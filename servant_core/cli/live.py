@@ -17,7 +17,7 @@ import time
 from typing import Any
 
 from servant_core.cli import terminal_text
-from servant_core.cli.options import finite_float, sample_rate
+from servant_core.cli.options import bounded_int, finite_float, sample_rate
 from servant_core.engine import Engine, LiveSettings, build_demo_engine, build_live_engine
 from servant_core.errors import ServantError
 from servant_core.event_text import arm_text, confidence_text, place
@@ -107,7 +107,9 @@ def register(subparsers: Any) -> None:
         "demo",
         description=DEMO_DESCRIPTION,
     )
-    demo.add_argument("--seed", type=int, default=0, help="seed of the synthesised scenes")
+    demo.add_argument(
+        "--seed", type=bounded_int(0, 2**31 - 1), default=0, help="seed of the synthesised scenes"
+    )
     demo.add_argument(
         "--paper",
         action="store_true",
