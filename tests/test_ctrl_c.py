@@ -7,6 +7,7 @@ Servant's code runs), then runs what the console script runs; Ctrl-C comes some 
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -40,3 +41,33 @@ def test_ctrl_c_early_prints_no_traceback(after: float, tmp_path) -> None:
     # Python was exiting (finalisation restores the default handler), which ends it silently
     # just the same, as a shell's status 130 (seen once in a loaded full run at 1.5 s)
     assert child.returncode in (130, 2, -signal.SIGINT), child.returncode
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["demo", "--headless", "--fast", "--duration", "60"],
+        ["demo", "--headless", "--fast", "--duration", "60", "--json"],
+        ["servo", "move", "--dry-run", "shoulder=80"],
+    ],
+)
+def test_a_reader_that_goes_away_ends_the_command_quietly(argv: list[str], tmp_path) -> None:
+    """`servant demo --headless | head -n 1`: once head had its line, every event after printed
+    a BrokenPipeError traceback (the demo went on for its whole duration), and a one-shot
+    command's output ended in one too."""
+    child = subprocess.Popen(
+        [sys.executable, "-c", CONSOLE_SCRIPT, *argv],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        cwd=REPO,
+        env={**os.environ, "SERVANT_DATA_DIR": str(tmp_path), "SERVANT_CONFIG_DIR": str(tmp_path)},
+    )
+    assert child.stdout is not None and child.stderr is not None
+    assert child.stdout.read(2)  # 'R' and the first byte of the output
+    child.stdout.close()  # the reader goes
+    started = time.monotonic()
+    err = child.stderr.read()
+    code = child.wait(timeout=60)
+    assert b"Traceback" not in err and b"Exception ignored" not in err, err.decode()
+    assert code in (0, 141), (code, err.decode())
+    assert time.monotonic() - started < 20

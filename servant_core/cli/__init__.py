@@ -207,6 +207,23 @@ def run_handler(args: argparse.Namespace) -> int:
             return 2
         except KeyboardInterrupt:
             return 130
+        except BrokenPipeError:
+            return reader_gone()
+
+
+# The shell's status for a command ended by SIGPIPE: `servant eval ... | head -n 3`.
+READER_GONE = 128 + 13
+
+
+def reader_gone() -> int:
+    """The program reading the output has gone (`| head` read enough): nothing more can be
+    said, so stdout goes to /dev/null (the exit's flush would raise again) and the command
+    ends quietly, as `yes | head` does."""
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    return READER_GONE
 
 
 def serve_until_stopped(
