@@ -23,6 +23,9 @@ CONSOLE_SCRIPT = (
 )
 
 
+SERVANT = "import sys; from servant_tui.main import main; sys.exit(main())"  # no 'R' first
+
+
 @pytest.mark.parametrize("after", [0.05, 0.2, 0.4, 0.8, 1.5])
 def test_ctrl_c_early_prints_no_traceback(after: float, tmp_path) -> None:
     child = subprocess.Popen(
@@ -71,3 +74,20 @@ def test_a_reader_that_goes_away_ends_the_command_quietly(argv: list[str], tmp_p
     assert b"Traceback" not in err and b"Exception ignored" not in err, err.decode()
     assert code in (0, 141), (code, err.decode())
     assert time.monotonic() - started < 20
+
+
+def test_teach_with_stdin_closed_is_one_line(tmp_path) -> None:
+    """`servant teach <&-`: sys.stdin is None, and reading it was an AttributeError traceback."""
+    done = subprocess.run(
+        [sys.executable, "-c", SERVANT, "teach", "--dry-run"],
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        cwd=REPO,
+        env={**os.environ, "SERVANT_DATA_DIR": str(tmp_path), "SERVANT_CONFIG_DIR": str(tmp_path)},
+        timeout=60,
+        preexec_fn=lambda: os.close(0),
+    )
+    assert done.returncode == 2, done.stderr.decode()
+    assert done.stderr.decode().splitlines() == [
+        "servant: error: teach reads the session from stdin, which is closed; run it in a terminal"
+    ]

@@ -312,7 +312,12 @@ class Session:
 def run_teach(
     args: argparse.Namespace, inp: TextIO | None = None, out: TextIO | None = None
 ) -> int:
-    session = Session(inp or sys.stdin, out or sys.stdout)
+    inp = inp or sys.stdin
+    if inp is None:  # started with stdin closed (`servant teach <&-`)
+        raise ServantError(
+            "teach reads the session from stdin, which is closed; run it in a terminal"
+        )
+    session = Session(inp, out or sys.stdout)
     settings = load_settings(args.settings)
     joint = settings.joint(args.joint).name if args.joint else settings.joints[0].name
     records_path = args.records or default_records_path()
