@@ -21,8 +21,6 @@ CONSOLE_SCRIPT = (
     "import os, sys; os.write(1, b'R'); "
     "from servant_tui.main import main; sys.exit(main())"  # what pip's `servant` script runs
 )
-
-
 SERVANT = "import sys; from servant_tui.main import main; sys.exit(main())"  # no 'R' first
 
 
@@ -74,6 +72,38 @@ def test_a_reader_that_goes_away_ends_the_command_quietly(argv: list[str], tmp_p
     assert b"Traceback" not in err and b"Exception ignored" not in err, err.decode()
     assert code in (0, 141), (code, err.decode())
     assert time.monotonic() - started < 20
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["demo", "--headless", "--fast", "--duration", "5"],
+        ["servo", "list-ports", "--json"],
+        ["servo", "move", "--dry-run", "shoulder=80"],
+    ],
+)
+def test_output_to_a_full_disk_is_one_line(argv: list[str], tmp_path) -> None:
+    """`servant ... > /dev/full` (a full disk behind a redirection) ended in an OSError
+    traceback, in the demo one for every event."""
+    with open("/dev/full", "wb") as full:
+        done = subprocess.run(
+            [sys.executable, "-c", SERVANT, *argv],
+            stdout=full,
+            stderr=subprocess.PIPE,
+            cwd=REPO,
+            env={
+                **os.environ,
+                "SERVANT_DATA_DIR": str(tmp_path),
+                "SERVANT_CONFIG_DIR": str(tmp_path),
+            },
+            timeout=60,
+        )
+    lines = done.stderr.decode().splitlines()
+    assert done.returncode == 2, done.stderr.decode()
+    assert lines == [
+        "servant: error: cannot write the output (No space left on device); "
+        "check where it is redirected to"
+    ]
 
 
 def test_teach_with_stdin_closed_is_one_line(tmp_path) -> None:

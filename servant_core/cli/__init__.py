@@ -161,10 +161,27 @@ def build_parser(lazy: bool = True) -> argparse.ArgumentParser:
 
 def emit(args: argparse.Namespace, payload: Any, text: str) -> None:
     """Print `payload` as JSON when `--json` was given, else the plain `text`."""
-    if getattr(args, "json", False):
-        print(json.dumps(payload, indent=2, default=_json_default))
-    else:
-        print(printable(terminal_text(text), sys.stdout))
+    text = (
+        json.dumps(payload, indent=2, default=_json_default)
+        if getattr(args, "json", False)
+        else printable(terminal_text(text), sys.stdout)
+    )
+    write_line(text)
+
+
+def write_line(text: str, stream: Any = None) -> None:
+    """Print a line of output and flush it, so that output that cannot be written (a full disk
+    behind `> file`, /dev/full) is one ServantError now, not a traceback here or at exit."""
+    try:
+        print(text, file=stream or sys.stdout, flush=True)
+    except BrokenPipeError:
+        raise  # the reader has gone: run_handler ends quietly
+    except OSError as exc:
+        reader_gone()
+        raise ServantError(
+            f"cannot write the output ({exc.strerror or type(exc).__name__}); "
+            "check where it is redirected to"
+        ) from None
 
 
 def one_line(text: str, keep: str = "") -> str:

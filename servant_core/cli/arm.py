@@ -25,7 +25,7 @@ from servant_core.actions.records import (
     label_scores,
     load_records,
 )
-from servant_core.cli import emit, serve_until_stopped, terminal_text
+from servant_core.cli import emit, serve_until_stopped, terminal_text, write_line
 from servant_core.cli.options import bounded_int, finite_float
 from servant_core.errors import ServantError
 from servant_core.event_text import pose_text
@@ -126,7 +126,7 @@ def _open_link(args: argparse.Namespace, settings: Settings, out: TextIO) -> Ser
             "dry_run": True,
             "clock": clock,
             "sleep": clock.sleep,
-            "on_bytes": lambda data: print(f"  bytes: {_show_bytes(protocol, data)}", file=out),
+            "on_bytes": lambda data: write_line(f"  bytes: {_show_bytes(protocol, data)}", out),
         }
     return ServoLink.open(
         args.port or settings.serial_port,
@@ -195,7 +195,7 @@ def run_move(args: argparse.Namespace) -> int:
         link.arm()
         reached = link.move_to(pose)
         for note in link.notes:
-            print(terminal_text(note), file=out)
+            write_line(terminal_text(note), out)
         emit(
             args,
             {
@@ -293,7 +293,7 @@ class Session:
         self.echo = not (hasattr(inp, "isatty") and inp.isatty())
 
     def say(self, line: str) -> None:
-        print(terminal_text(line), file=self.out, flush=True)
+        write_line(terminal_text(line), self.out)
 
     def ask(self, prompt: str) -> str | None:
         """The answer, stripped; None at the end of input."""

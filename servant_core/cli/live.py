@@ -234,7 +234,7 @@ def run_demo(args: argparse.Namespace) -> int:
                 if engine.clock() >= end or engine.clock() == before:  # the end, or no more sound
                     break
             engine.stop()
-            return reader_gone() if show.gone.is_set() else 0
+            return show.status()
         return _run(engine, args)
 
 
@@ -252,17 +252,24 @@ def _run(engine: Engine, args: argparse.Namespace) -> int:
         pass
     finally:
         engine.stop()
-    return reader_gone() if show.gone.is_set() else 0
+    return show.status()
 
 
 class _Printer:
-    """Prints each event's line (or JSON); `gone` is set once the reader of the output has
-    gone (`| head -n 5`), which ends the run (the arm disarmed as at any end), not a traceback
-    for every event after."""
+    """Prints each event's line (or JSON); `gone` is set once the output cannot be written (its
+    reader has gone, `| head -n 5`, or its disk is full), which ends the run (the arm disarmed
+    as at any end), not a traceback for every event after."""
 
     def __init__(self, as_json: bool) -> None:
         self.as_json = as_json
         self.gone = threading.Event()
+        self.failed = False  # gone because the output failed, not because its reader left
+
+    def status(self) -> int:
+        """The command's exit status once the run has ended."""
+        if not self.gone.is_set():
+            return 0
+        return 2 if self.failed else reader_gone()
 
     def __call__(self, event: Event) -> None:
         text = _event_json(event) if self.as_json else _event_line(event)
@@ -272,6 +279,16 @@ class _Printer:
             print(terminal_text(text), flush=True)
         except BrokenPipeError:
             reader_gone()
+            self.gone.set()
+        except OSError as exc:  # a full disk where the output is redirected: said once, then end
+            reason = exc.strerror or type(exc).__name__
+            print(
+                f"servant: error: cannot write the output ({reason}); "
+                "check where it is redirected to",
+                file=sys.stderr,
+            )
+            reader_gone()
+            self.failed = True
             self.gone.set()
 
 
