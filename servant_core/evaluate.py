@@ -54,6 +54,7 @@ from servant_core.recognisers import (
 )
 from servant_core.recognisers.background import kept_out
 from servant_core.recognisers.base import open_predict, open_probabilities
+from servant_core.storage import read_bounded_bytes
 
 PROTOCOLS = EVAL_PROTOCOLS
 # For a library taught in the app, 5 s at a time: `temporal` where recordings are long enough to
@@ -191,13 +192,18 @@ def source_of(path: Path) -> str:
     return Path(path).stem.split("-", 1)[0]
 
 
+# A line a recording: a thousand times the largest library Servant was evaluated on.
+MAX_GROUPS_BYTES = 16 << 20
+
+
 def read_groups(path: Path, root: Path) -> dict[str, str]:
     """A `--groups` file: one recording a line, its path (relative to `root`, or absolute below
     it) and then its group, the line's last word; blank lines and `#` comments are skipped.
     Returns recording path relative to `root` (POSIX) -> group."""
+    data = read_bounded_bytes(path, "groups file", MAX_GROUPS_BYTES)
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as error:
         raise ServantError(f"{path}: cannot read the groups file ({error})") from None
     groups: dict[str, str] = {}
     for number, line in enumerate(text.splitlines(), 1):

@@ -34,7 +34,7 @@ from servant_core.senses import ROLE_SENSE
 from servant_core.storage import (
     atomic_save_npz,
     check_replaceable,
-    is_servant_npz,
+    is_servant_npz_of,
     open_regular_file,
     os_reason,
 )
@@ -115,7 +115,7 @@ def save_model(
 def check_model_output(path: str | Path) -> Path:
     """`path` if a model may be saved there: not a folder, nor a file that is not a model."""
     path = Path(path)
-    check_replaceable(path, "model file", is_servant_npz)
+    check_replaceable(path, "model file", is_servant_npz_of(FORMAT))
     if path.is_dir():
         raise ServantError(f"{path}: is a folder; give a model file name such as {path}/model.npz")
     return path

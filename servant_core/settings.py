@@ -20,6 +20,9 @@ PROTOCOLS = ("maestro", "ssc32", "firmata")
 MIN_PULSE_US, MAX_PULSE_US = 400, 2600  # beyond what any hobby servo takes
 MAX_WINDOW_S = 600.0  # the paper's windows are 30 s and 20 s; ten minutes is far beyond any use
 MAX_PICTURES = 1000
+# A speed above 0 but tiny (5e-324 degrees a second) made `servo move` wait for ever: the
+# slowest joint worth driving turns its quarter circle in 90 s.
+MIN_SPEED_DEG_S = 1.0
 MAX_FILE_BYTES = 1 << 20  # a settings file is a few KiB; more is not one
 
 
@@ -62,8 +65,11 @@ class Joint:
                 f"joint {self.name!r}: pulses must satisfy "
                 f"{MIN_PULSE_US} <= min_pulse_us < max_pulse_us <= {MAX_PULSE_US}"
             )
-        if not (_is_number(self.max_speed_deg_s) and self.max_speed_deg_s > 0):
-            lines.append(f"joint {self.name!r}: max_speed_deg_s must be a positive number")
+        if not (_is_number(self.max_speed_deg_s) and self.max_speed_deg_s >= MIN_SPEED_DEG_S):
+            lines.append(
+                f"joint {self.name!r}: max_speed_deg_s must be a number of at least "
+                f"{MIN_SPEED_DEG_S:g} (degrees a second)"
+            )
         home = self.home_angle
         if self.min_angle < self.max_angle and not (
             _is_number(home) and self.min_angle <= home <= self.max_angle

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import io
 import json
 import os
 import stat
@@ -127,8 +128,6 @@ def atomic_save_npz(path: str | os.PathLike[str], arrays: dict[str, np.ndarray])
     for name, array in arrays.items():
         if np.asarray(array).dtype == object:
             raise TypeError(f"array {name!r} has dtype object, which would need pickle")
-    import io
-
     buffer = io.BytesIO()
     np.savez(buffer, **arrays)  # type: ignore[arg-type]  # numpy's stub types **kwds oddly
     return atomic_write_bytes(path, buffer.getvalue())
@@ -173,15 +172,51 @@ def check_replaceable(
             f"{path}: exists and is not {_article(what)}, so it is not overwritten; "
             "move it away or choose another name"
         )
+    if exists and _read_only(path):
+        raise ServantError(
+            f"{path}: is read-only, so it is not overwritten; make it writable "
+            "(chmod u+w) or choose another name"
+        )
 
 
-def is_servant_npz(path: Path) -> bool:
-    """A regular `.npz` that Servant wrote: a zip archive with a `header.npy` member."""
+def _read_only(path: Path) -> bool:
+    """A file this user may not write, or whose owner made it read-only (`chmod a-w`): a
+    replacement by rename never asks the file itself, so its mode is asked here (as root too)."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return False
+    return not mode & stat.S_IWUSR or not os.access(path, os.W_OK)
+
+
+# A model's header is at most a million characters (4 bytes each in the array); more is no header.
+MAX_HEADER_MEMBER_BYTES = 8 << 20
+
+
+def servant_npz_format(path: Path) -> str | None:
+    """The `format` a `.npz` that Servant wrote names in its JSON header (`servant-model`,
+    `servant-action-learner`); None for any other file, or one whose header cannot be read."""
+    from servant_core.numbers import json_loads  # numbers is light; imported where needed
+
     try:
         with open_regular_file(path, "file") as handle, zipfile.ZipFile(handle) as archive:
-            return "header.npy" in archive.namelist()
-    except (ServantError, OSError, zipfile.BadZipFile, ValueError, EOFError):
-        return False
+            info = archive.getinfo("header.npy")
+            if info.file_size > MAX_HEADER_MEMBER_BYTES:
+                return None
+            with archive.open(info) as member:
+                header = np.load(io.BytesIO(member.read()), allow_pickle=False)
+        found = json_loads(str(header)).get("format")
+    except (ServantError, OSError, zipfile.BadZipFile, KeyError, ValueError, EOFError):
+        return None
+    except (AttributeError, TypeError, RecursionError):  # a header that is not a JSON object
+        return None
+    return found if isinstance(found, str) else None
+
+
+def is_servant_npz_of(fmt: str) -> Callable[[Path], bool]:
+    """A test for `check_replaceable`: the file is a Servant `.npz` of format `fmt` (a model
+    file is never taken for an action learner's, nor the other way round)."""
+    return lambda path: servant_npz_format(path) == fmt
 
 
 def open_regular_file(path: str | os.PathLike[str], what: str) -> BinaryIO:

@@ -126,7 +126,9 @@ def test_a_file_size_limit_leaves_the_old_model_intact(tmp_path):
         for value in ("nan", "inf", "-1")
     ]
     + [["eval", "image", "LIB", "--split", value] for value in ("0", "1", "nan")]
-    + [["predict", "M", "--image", "x.png", "--pictures", "0"]],
+    + [["predict", "M", "--image", "x.png", "--pictures", "0"]]
+    # scikit-learn takes a random state of 32 bits: 10**30 was a traceback from the demo's fit
+    + [["demo", "--headless", "--fast", "--seed", value] for value in ("-1", "2" + "0" * 30)],
 )
 def test_bad_option_values_are_refused_by_the_parser(argv):
     outcome = run_cli(*argv)

@@ -7,6 +7,7 @@ Servant's code runs), then runs what the console script runs; Ctrl-C comes some 
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -20,6 +21,7 @@ CONSOLE_SCRIPT = (
     "import os, sys; os.write(1, b'R'); "
     "from servant_tui.main import main; sys.exit(main())"  # what pip's `servant` script runs
 )
+SERVANT = "import sys; from servant_tui.main import main; sys.exit(main())"  # no 'R' first
 
 
 @pytest.mark.parametrize("after", [0.05, 0.2, 0.4, 0.8, 1.5])
@@ -40,3 +42,82 @@ def test_ctrl_c_early_prints_no_traceback(after: float, tmp_path) -> None:
     # Python was exiting (finalisation restores the default handler), which ends it silently
     # just the same, as a shell's status 130 (seen once in a loaded full run at 1.5 s)
     assert child.returncode in (130, 2, -signal.SIGINT), child.returncode
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["demo", "--headless", "--fast", "--duration", "60"],
+        ["demo", "--headless", "--fast", "--duration", "60", "--json"],
+        ["servo", "move", "--dry-run", "shoulder=80"],
+    ],
+)
+def test_a_reader_that_goes_away_ends_the_command_quietly(argv: list[str], tmp_path) -> None:
+    """`servant demo --headless | head -n 1`: once head had its line, every event after printed
+    a BrokenPipeError traceback (the demo went on for its whole duration), and a one-shot
+    command's output ended in one too."""
+    child = subprocess.Popen(
+        [sys.executable, "-c", CONSOLE_SCRIPT, *argv],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        cwd=REPO,
+        env={**os.environ, "SERVANT_DATA_DIR": str(tmp_path), "SERVANT_CONFIG_DIR": str(tmp_path)},
+    )
+    assert child.stdout is not None and child.stderr is not None
+    assert child.stdout.read(2)  # 'R' and the first byte of the output
+    child.stdout.close()  # the reader goes
+    started = time.monotonic()
+    err = child.stderr.read()
+    code = child.wait(timeout=60)
+    assert b"Traceback" not in err and b"Exception ignored" not in err, err.decode()
+    assert code in (0, 141), (code, err.decode())
+    assert time.monotonic() - started < 20
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["demo", "--headless", "--fast", "--duration", "5"],
+        ["servo", "list-ports", "--json"],
+        ["servo", "move", "--dry-run", "shoulder=80"],
+    ],
+)
+def test_output_to_a_full_disk_is_one_line(argv: list[str], tmp_path) -> None:
+    """`servant ... > /dev/full` (a full disk behind a redirection) ended in an OSError
+    traceback, in the demo one for every event."""
+    with open("/dev/full", "wb") as full:
+        done = subprocess.run(
+            [sys.executable, "-c", SERVANT, *argv],
+            stdout=full,
+            stderr=subprocess.PIPE,
+            cwd=REPO,
+            env={
+                **os.environ,
+                "SERVANT_DATA_DIR": str(tmp_path),
+                "SERVANT_CONFIG_DIR": str(tmp_path),
+            },
+            timeout=60,
+        )
+    lines = done.stderr.decode().splitlines()
+    assert done.returncode == 2, done.stderr.decode()
+    assert lines == [
+        "servant: error: cannot write the output (No space left on device); "
+        "check where it is redirected to"
+    ]
+
+
+def test_teach_with_stdin_closed_is_one_line(tmp_path) -> None:
+    """`servant teach <&-`: sys.stdin is None, and reading it was an AttributeError traceback."""
+    done = subprocess.run(
+        [sys.executable, "-c", SERVANT, "teach", "--dry-run"],
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        cwd=REPO,
+        env={**os.environ, "SERVANT_DATA_DIR": str(tmp_path), "SERVANT_CONFIG_DIR": str(tmp_path)},
+        timeout=60,
+        preexec_fn=lambda: os.close(0),
+    )
+    assert done.returncode == 2, done.stderr.decode()
+    assert done.stderr.decode().splitlines() == [
+        "servant: error: teach reads the session from stdin, which is closed; run it in a terminal"
+    ]

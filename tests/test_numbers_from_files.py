@@ -23,7 +23,7 @@ from servant_core.errors import ServantError
 from servant_core.numbers import FLOAT_MAX, is_finite_number, json_loads
 from servant_core.servo.calibration import clamp_pose
 from servant_core.settings import default_joints
-from tests.cli_harness import assert_clear, run_cli
+from tests.cli_harness import assert_clear, assert_refused, run_cli, run_cli_subprocess
 
 HUGE = 10**400
 
@@ -137,3 +137,19 @@ def test_teach_records_are_bounded_in_scenes_and_records(tmp_path: Path) -> None
             TeachRecord("one-more", label_scores("one-more"), {"shoulder": 1.0}, 0.0), full
         )
     assert full.read_bytes() == before
+
+
+@pytest.mark.parametrize("speed", ["4.9e-324", "1e-300", "0.001"])
+def test_a_joint_speed_too_small_to_finish_a_move_is_refused(tmp_path: Path, speed: str) -> None:
+    """A speed above 0 but tiny made `servo move` wait for ever (the move needs 5/5e-324 s,
+    which is infinity): a hang, where a line that says so was due."""
+    joint = (
+        '{"name": "shoulder", "channel": 3, "min_angle": 0, "max_angle": 90, "min_pulse_us": '
+        f'1000, "max_pulse_us": 1500, "max_speed_deg_s": {speed}, "home_angle": 0}}'
+    )
+    path = tmp_path / "settings.json"
+    path.write_text(f'{{"format": "servant-settings", "version": 1, "joints": [{joint}]}}')
+    outcome = run_cli_subprocess(
+        "servo", "move", "--settings", str(path), "--dry-run", "shoulder=5", timeout=20
+    )
+    assert_refused(outcome, "max_speed_deg_s", "at least 1")

@@ -17,6 +17,7 @@ from servant_core.capture.camera import Camera
 from servant_core.errors import ServantError
 from tests.cli_harness import assert_clear, run_cli_subprocess
 from tests.conftest import tone
+from tests.test_cli_boundaries import audio_library
 
 SPECIAL = ["fifo", "zero"]
 
@@ -45,6 +46,21 @@ def test_teach_records_as_a_special_file_are_one_line(tmp_path: Path, kind: str)
     records = special(tmp_path / "records.json", kind)
     outcome = run_cli_subprocess(
         "teach", "--records", str(records), "--learner", str(tmp_path / "l.npz"), timeout=30
+    )
+    assert_clear(outcome, seconds=30)
+    # a link is refused as the place to write the records, before it is read
+    assert outcome.code == 2
+    assert ("not a regular file" if kind == "fifo" else "symbolic link") in outcome.err
+
+
+@pytest.mark.parametrize("kind", SPECIAL)
+def test_a_groups_file_as_a_special_file_is_one_line(tmp_path: Path, kind: str) -> None:
+    """`eval audio --protocol source --groups FIFO` waited for a writer for ever (and a link to
+    /dev/zero read until memory was gone): the groups file was read with `read_text`."""
+    lib = audio_library(tmp_path / "lib")
+    groups = special(tmp_path / "groups.txt", kind)
+    outcome = run_cli_subprocess(
+        "eval", "audio", str(lib), "--protocol", "source", "--groups", str(groups), timeout=30
     )
     assert_clear(outcome, seconds=30)
     assert outcome.code == 2 and "not a regular file" in outcome.err

@@ -77,3 +77,40 @@ def test_teach_escapes_scenes_read_from_the_records(tmp_path: Path) -> None:
     again = io.StringIO()
     run_teach(parser.parse_args([*argv, "--predict-only"]), io.StringIO(f"{HOSTILE}\n"), again)
     assert_inert(again.getvalue())
+
+
+def test_emulate_servo_escapes_joint_names_from_the_settings(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The emulator names each move's joint from the user's settings, printed raw before."""
+    import threading
+
+    from servant_core.cli.arm import _say_moves
+    from servant_core.servo.emulator import start_emulator
+    from servant_core.servo.link import ServoLink
+    from servant_core.settings import Joint
+
+    joint = Joint(HOSTILE, 3, 0.0, 90.0, 1000.0, 1500.0, 90.0, 0.0)
+    emulator, port = start_emulator("maestro")
+    stop = threading.Event()
+    watcher = threading.Thread(target=_say_moves, args=(emulator, [joint], stop))
+    watcher.start()
+    out = ""
+    try:
+        link = ServoLink.open(port, "maestro", [joint])
+        try:
+            link.arm()
+            link.move_to({HOSTILE: 20.0})
+        finally:
+            link.close()
+        for _ in range(50):
+            out += capsys.readouterr().out
+            if "received a move" in out:
+                break
+            stop.wait(0.1)
+    finally:
+        stop.set()
+        watcher.join()
+        emulator.stop()
+    assert "PWNED" in out
+    assert_inert(out)

@@ -7,10 +7,13 @@ model written over keeps its permissions.
 
 from __future__ import annotations
 
+import io
 import os
 import stat
+import sys
 import time
 from pathlib import Path
+from unittest import mock
 
 import pytest
 
@@ -19,7 +22,7 @@ from servant_core.actions.records import TeachRecord, label_scores
 from servant_core.errors import ServantError
 from servant_core.pty_port import PtyPort
 from servant_core.storage import atomic_write_bytes
-from tests.cli_harness import assert_clear, assert_refused, run_cli
+from tests.cli_harness import Outcome, assert_clear, assert_refused, run_cli
 from tests.test_cli_boundaries import SMALL_AUDIO, audio_library
 
 PRECIOUS = b"the user's own words\n"
@@ -105,6 +108,23 @@ def test_a_model_written_over_keeps_its_permissions(lib: Path, tmp_path: Path) -
     assert stat.S_IMODE(model.stat().st_mode) == 0o640
 
 
+def test_a_read_only_model_or_learner_is_not_written_over(lib: Path, tmp_path: Path) -> None:
+    """`chmod a-w model.npz` protects a model: replacing it by rename never asked the file, so
+    `train -o` wrote over it (and kept it read-only)."""
+    model, learner = tmp_path / "model.npz", tmp_path / "learner.npz"
+    assert train(lib, model).code == 0
+    _taught_learner().save(learner)
+    for path in (model, learner):
+        path.chmod(0o444)
+    model_bytes, learner_bytes = model.read_bytes(), learner.read_bytes()
+    assert_refused(train(lib, model), "model.npz", "read-only", "chmod u+w")
+    with pytest.raises(ServantError, match="read-only"):
+        _taught_learner().save(learner)
+    assert model.read_bytes() == model_bytes and learner.read_bytes() == learner_bytes
+    model.chmod(0o644)
+    assert train(lib, model).code == 0
+
+
 def test_the_action_learner_refuses_a_file_that_is_not_one(tmp_path: Path) -> None:
     records = [
         TeachRecord(scene, label_scores(scene, ["cafe", "gym"]), {"shoulder": angle}, 0.0)
@@ -118,6 +138,58 @@ def test_the_action_learner_refuses_a_file_that_is_not_one(tmp_path: Path) -> No
     assert precious.read_bytes() == PRECIOUS
     learner.save(tmp_path / "fresh.npz")
     learner.save(tmp_path / "fresh.npz")  # its own kind: replaced
+
+
+def _taught_learner() -> ActionLearner:
+    records = [
+        TeachRecord(scene, label_scores(scene, ["cafe", "gym"]), {"shoulder": angle}, 0.0)
+        for scene, angle in [("cafe", 10.0), ("gym", 80.0)] * 2
+    ]
+    return ActionLearner(max_iter=20).fit(records)
+
+
+def test_a_model_and_an_action_learner_never_replace_each_other(lib: Path, tmp_path: Path) -> None:
+    """Both are Servant `.npz` files: `teach --learner model.npz` once replaced a trained model
+    with a learner, and `train -o learner.npz` the taught learner with a model."""
+    model, learner = tmp_path / "model.npz", tmp_path / "learner.npz"
+    assert train(lib, model).code == 0
+    _taught_learner().save(learner)
+    model_bytes, learner_bytes = model.read_bytes(), learner.read_bytes()
+    with pytest.raises(ServantError, match="not an action learner file"):
+        _taught_learner().save(model)
+    assert_refused(train(lib, learner), "learner.npz", "not a model file")
+    assert model.read_bytes() == model_bytes and learner.read_bytes() == learner_bytes
+
+
+def teach(tmp_path: Path, records: Path, learner: Path, script: str) -> Outcome:
+    argv = ["teach", "--dry-run", "--records", str(records), "--learner", str(learner)]
+    with mock.patch.object(sys, "stdin", io.StringIO(script)):
+        return run_cli(*argv, "--iterations", "20")
+
+
+def test_teach_keeps_a_records_link_and_a_read_only_records_file(tmp_path: Path) -> None:
+    """`teach --records link.json` replaced the link with a file; a read-only record file was
+    written over; and a learner destination that would be refused was found only after the
+    whole session was taught (and its records written)."""
+    records, learner = tmp_path / "records.json", tmp_path / "learner.npz"
+    assert teach(tmp_path, records, learner, "cafe\n10\ngym\n80\n\n").code == 0
+    before = records.read_bytes()
+    link = tmp_path / "link.json"
+    link.symlink_to(records)
+    outcome = teach(tmp_path, link, tmp_path / "l2.npz", "office\n30\n\n")
+    assert_refused(outcome, "link.json", "symbolic link")
+    assert link.is_symlink() and records.read_bytes() == before
+    records.chmod(0o444)
+    outcome = teach(tmp_path, records, tmp_path / "l3.npz", "office\n30\n\n")
+    assert_refused(outcome, "records.json", "read-only")
+    assert records.read_bytes() == before
+    records.chmod(0o644)
+    model = tmp_path / "model.npz"
+    model.write_bytes(PRECIOUS)
+    outcome = teach(tmp_path, records, model, "office\n30\n\n")
+    assert_refused(outcome, "model.npz", "not an action learner file")
+    assert "Scene label" not in outcome.out  # refused before the session
+    assert records.read_bytes() == before and model.read_bytes() == PRECIOUS
 
 
 def test_a_save_removes_the_temporaries_a_killed_save_left(tmp_path: Path) -> None:

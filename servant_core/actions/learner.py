@@ -35,7 +35,7 @@ from servant_core.storage import (
     atomic_save_npz,
     check_replaceable,
     data_dir,
-    is_servant_npz,
+    is_servant_npz_of,
     os_reason,
 )
 
@@ -76,6 +76,14 @@ def forward(
         if i < len(coefs) - 1:
             a = ACTIVATIONS[activation](a)
     return a
+
+
+def check_learner_output(path: str | Path) -> Path:
+    """`path` if an action learner may be saved there: not a link, nor a read-only file, nor a
+    file of another kind (a model, a document)."""
+    path = Path(path)
+    check_replaceable(path, "action learner file", is_servant_npz_of(FORMAT))
+    return path
 
 
 class ActionLearner:
@@ -257,7 +265,7 @@ class ActionLearner:
             "history": self.history_,
             "n_records": self.n_records_,
         }
-        check_replaceable(path, "action learner file", is_servant_npz)
+        check_learner_output(path)
         arrays = {f"coef_{i}": w for i, w in enumerate(self.coefs_)}
         arrays |= {f"intercept_{i}": b for i, b in enumerate(self.intercepts_)}
         arrays |= {

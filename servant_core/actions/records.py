@@ -21,6 +21,7 @@ from servant_core.errors import ServantError
 from servant_core.numbers import is_finite_number, json_loads
 from servant_core.storage import (
     atomic_write_bytes,
+    check_replaceable,
     data_dir,
     os_reason,
     read_bounded_bytes,
@@ -253,11 +254,20 @@ def encode_records(records: Sequence[TeachRecord]) -> str:
     return _text([_line(r) for r in records])
 
 
+def check_records_output(path: str | Path | None = None) -> Path:
+    """`path` if teach records may be written there: not a symbolic link (replacing it loses the
+    link), nor a read-only file, nor a name a scene library reads. What the file holds is
+    checked where it is read: an append reads it first, and refuses a file of other things."""
+    path = Path(path) if path is not None else default_records_path()
+    check_replaceable(path, "teach record file", lambda _: True)
+    return path
+
+
 def save_records(
     records: Sequence[TeachRecord], path: str | Path | None = None, lines: list[str] | None = None
 ) -> Path:
     """Write the records (`lines`: their lines, if made already), atomically."""
-    path = Path(path) if path is not None else default_records_path()
+    path = check_records_output(path)
     lines = lines if lines is not None else [_line(r) for r in records]
     data = _text(lines).encode("utf-8")
     try:

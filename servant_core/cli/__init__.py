@@ -173,10 +173,27 @@ def later(module: str, name: str) -> Callable[[argparse.Namespace], int]:
 
 def emit(args: argparse.Namespace, payload: Any, text: str) -> None:
     """Print `payload` as JSON when `--json` was given, else the plain `text`."""
-    if getattr(args, "json", False):
-        print(json.dumps(payload, indent=2, default=_json_default))
-    else:
-        print(printable(terminal_text(text), sys.stdout))
+    text = (
+        json.dumps(payload, indent=2, default=_json_default)
+        if getattr(args, "json", False)
+        else printable(terminal_text(text), sys.stdout)
+    )
+    write_line(text)
+
+
+def write_line(text: str, stream: Any = None) -> None:
+    """Print a line of output and flush it, so that output that cannot be written (a full disk
+    behind `> file`, /dev/full) is one ServantError now, not a traceback here or at exit."""
+    try:
+        print(text, file=stream or sys.stdout, flush=True)
+    except BrokenPipeError:
+        raise  # the reader has gone: run_handler ends quietly
+    except OSError as exc:
+        reader_gone()
+        raise ServantError(
+            f"cannot write the output ({exc.strerror or type(exc).__name__}); "
+            "check where it is redirected to"
+        ) from None
 
 
 def one_line(text: str, keep: str = "") -> str:
@@ -219,6 +236,23 @@ def run_handler(args: argparse.Namespace) -> int:
             return 2
         except KeyboardInterrupt:
             return 130
+        except BrokenPipeError:
+            return reader_gone()
+
+
+# The shell's status for a command ended by SIGPIPE: `servant eval ... | head -n 3`.
+READER_GONE = 128 + 13
+
+
+def reader_gone() -> int:
+    """The program reading the output has gone (`| head` read enough): nothing more can be
+    said, so stdout goes to /dev/null (the exit's flush would raise again) and the command
+    ends quietly, as `yes | head` does."""
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    return READER_GONE
 
 
 def serve_until_stopped(

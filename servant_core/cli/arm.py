@@ -12,15 +12,20 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TextIO
 
-from servant_core.actions.learner import ActionLearner, default_learner_path
+from servant_core.actions.learner import (
+    ActionLearner,
+    check_learner_output,
+    default_learner_path,
+)
 from servant_core.actions.records import (
     TeachRecord,
     append_record,
+    check_records_output,
     default_records_path,
     label_scores,
     load_records,
 )
-from servant_core.cli import emit, serve_until_stopped, terminal_text
+from servant_core.cli import emit, serve_until_stopped, terminal_text, write_line
 from servant_core.cli.options import bounded_int, finite_float
 from servant_core.errors import ServantError
 from servant_core.event_text import pose_text
@@ -121,7 +126,7 @@ def _open_link(args: argparse.Namespace, settings: Settings, out: TextIO) -> Ser
             "dry_run": True,
             "clock": clock,
             "sleep": clock.sleep,
-            "on_bytes": lambda data: print(f"  bytes: {_show_bytes(protocol, data)}", file=out),
+            "on_bytes": lambda data: write_line(f"  bytes: {_show_bytes(protocol, data)}", out),
         }
     return ServoLink.open(
         args.port or settings.serial_port,
@@ -190,7 +195,7 @@ def run_move(args: argparse.Namespace) -> int:
         link.arm()
         reached = link.move_to(pose)
         for note in link.notes:
-            print(terminal_text(note), file=out)
+            write_line(terminal_text(note), out)
         emit(
             args,
             {
@@ -254,7 +259,8 @@ def _say_moves(emulator: ServoEmulator, joints: list[Joint], stop: threading.Eve
             if t > newest:
                 newest, pending[channel] = t, value
         if pending and emulator.clock() - newest >= MOVE_QUIET_S:
-            print(f"received a move: {_targets_text(emulator, joints, pending)}", flush=True)
+            text = _targets_text(emulator, joints, pending)  # joint names from the settings
+            print(terminal_text(f"received a move: {text}"), flush=True)
             pending = {}
 
 
@@ -287,7 +293,7 @@ class Session:
         self.echo = not (hasattr(inp, "isatty") and inp.isatty())
 
     def say(self, line: str) -> None:
-        print(terminal_text(line), file=self.out, flush=True)
+        write_line(terminal_text(line), self.out)
 
     def ask(self, prompt: str) -> str | None:
         """The answer, stripped; None at the end of input."""
@@ -306,11 +312,19 @@ class Session:
 def run_teach(
     args: argparse.Namespace, inp: TextIO | None = None, out: TextIO | None = None
 ) -> int:
-    session = Session(inp or sys.stdin, out or sys.stdout)
+    inp = inp or sys.stdin
+    if inp is None:  # started with stdin closed (`servant teach <&-`)
+        raise ServantError(
+            "teach reads the session from stdin, which is closed; run it in a terminal"
+        )
+    session = Session(inp, out or sys.stdout)
     settings = load_settings(args.settings)
     joint = settings.joint(args.joint).name if args.joint else settings.joints[0].name
     records_path = args.records or default_records_path()
     learner_path = args.learner or default_learner_path()
+    if not args.predict_only:  # before the session, not after what was taught in it
+        check_records_output(records_path)
+        check_learner_output(learner_path)
     link = _open_link(args, settings, session.out) if (args.port or args.dry_run) else None
     try:
         if link is not None:

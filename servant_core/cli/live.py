@@ -13,11 +13,11 @@ import argparse
 import dataclasses
 import json
 import sys
-import time
+import threading
 from typing import TYPE_CHECKING, Any
 
-from servant_core.cli import terminal_text
-from servant_core.cli.options import finite_float, sample_rate
+from servant_core.cli import reader_gone, terminal_text
+from servant_core.cli.options import bounded_int, finite_float, sample_rate
 from servant_core.errors import ServantError
 from servant_core.senses import SAMPLE_SENSES
 
@@ -96,7 +96,9 @@ def register(subparsers: Any) -> None:
         "demo",
         description=DEMO_DESCRIPTION,
     )
-    demo.add_argument("--seed", type=int, default=0, help="seed of the synthesised scenes")
+    demo.add_argument(
+        "--seed", type=bounded_int(0, 2**31 - 1), default=0, help="seed of the synthesised scenes"
+    )
     demo.add_argument(
         "--paper",
         action="store_true",
@@ -217,35 +219,75 @@ def run_demo(args: argparse.Namespace) -> int:
             policy=args.policy,
         )
         if args.fast:
-            engine.subscribe(_printer(args.json))
-            engine.run_until(args.duration if args.duration is not None else 95.0)
+            show = _Printer(args.json)
+            engine.subscribe(show)
+            end = args.duration if args.duration is not None else 95.0
+            while not show.gone.is_set():  # a second at a time, to stop once the reader has gone
+                before = engine.clock()
+                engine.run_until(min(end, before + 1.0))
+                if engine.clock() >= end or engine.clock() == before:  # the end, or no more sound
+                    break
             engine.stop()
-            return 0
+            return show.status()
         return _run(engine, args)
 
 
 def _run(engine: Engine, args: argparse.Namespace) -> int:
     if not args.headless:
         print("servant: the terminal UI is not attached here; running headless", file=sys.stderr)
-    engine.subscribe(_printer(args.json))
+    show = _Printer(args.json)
+    engine.subscribe(show)
     engine.start()
     try:
         while engine.running and (args.duration is None or engine.clock() < args.duration):
-            time.sleep(0.05)
+            if show.gone.wait(0.05):
+                break
     except KeyboardInterrupt:
         pass
     finally:
         engine.stop()
-    return 0
+    return show.status()
+
+
+class _Printer:
+    """Prints each event's line (or JSON); `gone` is set once the output cannot be written (its
+    reader has gone, `| head -n 5`, or its disk is full), which ends the run (the arm disarmed
+    as at any end), not a traceback for every event after."""
+
+    def __init__(self, as_json: bool) -> None:
+        self.as_json = as_json
+        self.gone = threading.Event()
+        self.failed = False  # gone because the output failed, not because its reader left
+
+    def status(self) -> int:
+        """The command's exit status once the run has ended."""
+        if not self.gone.is_set():
+            return 0
+        return 2 if self.failed else reader_gone()
+
+    def __call__(self, event: Event) -> None:
+        text = _event_json(event) if self.as_json else _event_line(event)
+        if text is None or self.gone.is_set():
+            return
+        try:
+            print(terminal_text(text), flush=True)
+        except BrokenPipeError:
+            reader_gone()
+            self.gone.set()
+        except OSError as exc:  # a full disk where the output is redirected: said once, then end
+            reason = exc.strerror or type(exc).__name__
+            print(
+                f"servant: error: cannot write the output ({reason}); "
+                "check where it is redirected to",
+                file=sys.stderr,
+            )
+            reader_gone()
+            self.failed = True
+            self.gone.set()
 
 
 def _printer(as_json: bool) -> Any:
-    def show(event: Event) -> None:
-        text = _event_json(event) if as_json else _event_line(event)
-        if text is not None:
-            print(terminal_text(text), flush=True)
-
-    return show
+    return _Printer(as_json)
 
 
 def _event_line(event: Event) -> str | None:
