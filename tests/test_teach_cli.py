@@ -298,3 +298,29 @@ def test_emulate_servo_prints_a_line_per_move_it_receives(tmp_path, monkeypatch,
         f"elbow 30° (channel {elbow.channel}, 1167 µs), "
         f"gripper 0° (channel {gripper.channel}, 1000 µs)"
     )
+
+
+@pytest.mark.parametrize("stdin", ["/dev/zero", "long"])
+def test_an_endless_or_overlong_answer_is_one_line(stdin, tmp_path):
+    """`servant teach < /dev/zero` read one endless line until memory ran out (4.5 GB in 10 s),
+    and a 20 MB label was taught into the records. In a child with bounded memory and time."""
+    limit = "import resource; resource.setrlimit(resource.RLIMIT_AS, (2 << 30, 2 << 30)); "
+    code = limit + "from servant_tui.main import main; raise SystemExit(main())"
+    argv = ["teach", "--records", str(tmp_path / "r.json"), "--learner", str(tmp_path / "l.npz")]
+    if stdin == "long":
+        source = tmp_path / "long.txt"
+        source.write_text("coffee" * 400_000 + "\n42\n\n")
+    else:
+        source = stdin
+    with open(source, "rb") as answers:
+        proc = subprocess.run(
+            [sys.executable, "-c", code, *argv],
+            stdin=answers,
+            capture_output=True,
+            timeout=60,
+        )
+    err = proc.stderr.decode()
+    assert proc.returncode == 2, err[-2000:]
+    assert err.startswith("servant: error: teach: an answer longer than 1000 characters")
+    assert err.count("\n") == 1
+    assert not (tmp_path / "r.json").exists()

@@ -284,6 +284,9 @@ def _targets_text(emulator: ServoEmulator, joints: list[Joint], targets: dict[in
 # -- teach ---------------------------------------------------------------------------------
 
 
+MAX_ANSWER_CHARS = 1000  # a scene's label or a command in a teach session, and far more
+
+
 class Session:
     """Prompts on `out`, answers from `inp`; when input is not a terminal, answers are echoed so
     a scripted session's transcript reads like an interactive one."""
@@ -296,10 +299,17 @@ class Session:
         write_line(terminal_text(line), self.out)
 
     def ask(self, prompt: str) -> str | None:
-        """The answer, stripped; None at the end of input."""
+        """The answer, stripped; None at the end of input. An answer is a scene's label or an
+        angle: one longer than `MAX_ANSWER_CHARS` is refused, not read to its end (`teach <
+        /dev/zero` read one endless line until memory ran out)."""
         self.out.write(prompt)
         self.out.flush()
-        line = self.inp.readline()
+        line = self.inp.readline(MAX_ANSWER_CHARS + 1)
+        if len(line.rstrip("\n")) > MAX_ANSWER_CHARS:
+            raise ServantError(
+                f"teach: an answer longer than {MAX_ANSWER_CHARS} characters; a scene's label "
+                "or an angle is short: check what is given to teach on its input"
+            )
         if not line:
             if self.echo:
                 self.out.write("\n")
