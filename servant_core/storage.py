@@ -196,6 +196,8 @@ MAX_HEADER_MEMBER_BYTES = 8 << 20
 def servant_npz_format(path: Path) -> str | None:
     """The `format` a `.npz` that Servant wrote names in its JSON header (`servant-model`,
     `servant-action-learner`); None for any other file, or one whose header cannot be read."""
+    import numpy as np
+
     from servant_core.numbers import json_loads  # numbers is light; imported where needed
 
     try:
