@@ -12,7 +12,7 @@ from typing import Any
 
 from servant_core.errors import ServantError
 from servant_core.numbers import is_finite_number, json_loads
-from servant_core.storage import atomic_write_json, config_dir, read_bounded_bytes
+from servant_core.storage import atomic_write_json, config_dir, no_file_yet, read_bounded_bytes
 
 FORMAT = "servant-settings"
 VERSION = 1
@@ -172,9 +172,9 @@ def default_settings_path() -> Path:
 def load_settings(path: str | Path | None = None) -> Settings:
     """The settings in `path` (default `config_dir()/settings.json`); defaults if missing."""
     path = Path(path) if path is not None else default_settings_path()
-    if not path.exists():
-        return Settings()
     fix = "fix or delete it to get the defaults"
+    if no_file_yet(path, "settings file", fix):
+        return Settings()
     text = read_bounded_bytes(path, "settings file", MAX_FILE_BYTES)
     try:
         data = json_loads(text.decode("utf-8"))

@@ -221,6 +221,20 @@ def is_servant_npz_of(fmt: str) -> Callable[[Path], bool]:
     return lambda path: servant_npz_format(path) == fmt
 
 
+def no_file_yet(path: Path, what: str, fix: str) -> bool:
+    """Whether there is no file at `path` yet (the caller uses its defaults). A link there that
+    leads to no file, its target gone or the links in a loop, is said, not taken for "none
+    yet": the user's settings or records would silently be the defaults."""
+    if path.exists():
+        return False
+    if path.is_symlink():
+        raise ServantError(
+            f"{path}: the {what} is a link that leads to no file (its target is missing, or "
+            f"the links loop); {fix}"
+        )
+    return True
+
+
 def open_regular_file(path: str | os.PathLike[str], what: str) -> BinaryIO:
     """Open a file for reading in Python (any file name works, even one that is not UTF-8);
     a missing file, a folder, a FIFO or a device is refused without blocking on it.

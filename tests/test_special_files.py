@@ -130,3 +130,23 @@ def test_a_recording_whose_disk_fails_is_one_line_and_quiet(
     assert "Input/output error" in str(refused.value) and "\n" not in str(refused.value)
     err = capfd.readouterr().err
     assert "Exception ignored" not in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("kind", ["loop", "dangling"])
+def test_settings_or_records_behind_a_link_to_no_file_are_one_line(tmp_path: Path, kind: str):
+    """A settings file that was a loop of links (or a link whose target is gone) was taken for
+    "no settings yet": the arm moved with the default joints, silently. Teach records likewise."""
+    for name in ("settings.json", "records.json"):
+        link = tmp_path / name
+        link.symlink_to(tmp_path / f"{name}.loop" if kind == "loop" else tmp_path / "gone")
+        if kind == "loop":
+            (tmp_path / f"{name}.loop").symlink_to(link)
+    settings = run_cli_subprocess(
+        "servo", "move", "--settings", str(tmp_path / "settings.json"), "--dry-run", "shoulder=10"
+    )
+    assert_clear(settings, seconds=30)
+    assert settings.code == 2 and "a link that leads to no file" in settings.err
+    from servant_core.actions.records import load_records
+
+    with pytest.raises(ServantError, match="a link that leads to no file"):
+        load_records(tmp_path / "records.json")

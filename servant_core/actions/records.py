@@ -23,6 +23,7 @@ from servant_core.storage import (
     atomic_write_bytes,
     check_replaceable,
     data_dir,
+    no_file_yet,
     os_reason,
     read_bounded_bytes,
 )
@@ -229,7 +230,7 @@ def load_records(
 ) -> list[TeachRecord]:
     """Every record in `path` (default `default_records_path()`); none if there is no file."""
     path = Path(path) if path is not None else default_records_path()
-    if not path.exists():
+    if no_file_yet(path, "teach record file", "fix the link or remove it"):
         return []
     return _load(path, legacy_joint)[1]
 
