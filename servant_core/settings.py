@@ -19,6 +19,8 @@ VERSION = 1
 PROTOCOLS = ("maestro", "ssc32", "firmata")
 MIN_PULSE_US, MAX_PULSE_US = 400, 2600  # beyond what any hobby servo takes
 MAX_WINDOW_S = 600.0  # the paper's windows are 30 s and 20 s; ten minutes is far beyond any use
+# and a tenth of a second is far below any (a picture interval of 5e-324 s passed as "above 0")
+MIN_WINDOW_S = 0.1
 MAX_PICTURES = 1000
 # A speed above 0 but tiny (5e-324 degrees a second) made `servo move` wait for ever: the
 # slowest joint worth driving turns its quarter circle in 90 s.
@@ -151,9 +153,9 @@ class Settings:
                 lines.append(f"{name} must be a port name or null, not {value!r}")
         for name in ("acoustic_window_s", "confirm_window_s", "picture_interval_s"):
             value = getattr(self, name)
-            if not (_is_number(value) and 0 < value <= MAX_WINDOW_S):
+            if not (_is_number(value) and MIN_WINDOW_S <= value <= MAX_WINDOW_S):
                 lines.append(
-                    f"{name} must be a number of seconds above 0, at most {MAX_WINDOW_S:g}"
+                    f"{name} must be a number of seconds, {MIN_WINDOW_S:g} to {MAX_WINDOW_S:g}"
                 )
         if not (_is_integer(self.pictures_needed) and 1 <= self.pictures_needed <= MAX_PICTURES):
             lines.append(f"pictures_needed must be an integer 1..{MAX_PICTURES}")

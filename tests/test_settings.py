@@ -108,6 +108,8 @@ def joints_file(**changes: object) -> str:
         ('{"protocol": {"a": 1}}', "protocol .* is unknown"),
         ('{"acoustic_window_s": 1e400}', "acoustic_window_s must be a number of seconds"),
         ('{"confirm_window_s": true}', "confirm_window_s must be a number of seconds"),
+        # Issue 24, re-probed: a window of 5e-324 s passed as "above 0".
+        ('{"picture_interval_s": 5e-324}', r"picture_interval_s must be .* 0.1 to 600"),
         ('{"pictures_needed": 3.0}', "pictures_needed must be an integer"),
         ('{"confidence_threshold": NaN}', "confidence_threshold must be a percentage"),
         # Issue 13, 9: a version that is not an integer is not "newer".
