@@ -104,6 +104,8 @@ class Predictions:
     elsewhere: list[bool] = field(default_factory=list)
 
     def extend(self, model: Recogniser, X: np.ndarray, truth: Sequence[str]) -> None:
+        if len(X) == 0:  # nothing of this fold to test (`scores` says so if nothing at all is)
+            return
         predicted = model.predict(X)
         opened = open_predict(model, X)
         proba = model.predict_proba(X)
@@ -552,6 +554,12 @@ def evaluate_image(
         X_train, y_train = X[train], [p.scene for p, t in zip(kept, train, strict=True) if t]
         X_test, y_test = X[~train], [p.scene for p, t in zip(kept, train, strict=True) if not t]
         protocol = f"file-order-{split:g}"
+        if not y_test:
+            raise ServantError(
+                f"{train_library.root}: nothing to evaluate: the file-order split keeps every "
+                "picture for training (a scene needs two pictures or more); take more pictures "
+                "or give a test library (--test)"
+            )
     else:
         X_train, kept_train = _pictures_and_features(model, train_library.pictures, on_error)
         X_test, kept_test = _pictures_and_features(model, test_library.pictures, on_error)
@@ -776,10 +784,12 @@ def score_fusion(
     leaned: Counter[str] = Counter()
     cursor = dict.fromkeys(setup.pictures, 0)
     for i, scene in enumerate(setup.truth):
-        pics = setup.pictures[scene]
-        start = cursor[scene]
+        # a scene whose pictures all went to training (one picture) shows its windows none
+        pics = setup.pictures.get(scene, [])
+        start = cursor.get(scene, 0)
         shown = [pics[(start + j) % len(pics)] for j in range(len(pics))]
-        cursor[scene] = (start + config.pictures_needed) % len(pics)
+        if pics:
+            cursor[scene] = (start + config.pictures_needed) % len(pics)
         heard = None if drop_sense == "audio" else setup.acoustic[i]
         decision = run_encounter(
             make_policy(), config, heard, [] if drop_sense == "image" else shown

@@ -9,11 +9,13 @@ from pathlib import Path
 
 import pytest
 
+from servant_core.audio import write_wav
 from servant_core.capture.sensor_sources import sensor_sources
 from servant_core.errors import ServantError
 from servant_core.modelfile import load_model
 from servant_core.storage import MAX_FOLDER_DEPTH, walk_files
 from tests.cli_harness import assert_refused, run_cli
+from tests.conftest import tone
 from tests.test_cli_boundaries import SMALL_AUDIO, audio_library, picture_library
 
 
@@ -110,3 +112,22 @@ def test_one_identical_picture_per_scene_is_one_line(tmp_path: Path) -> None:
         "train", str(lib), "-o", str(tmp_path / "m.npz"), "--image-method", "fisher-bovw"
     )
     assert_refused(outcome, "no scene can be told from another")
+
+
+def test_one_picture_per_scene_evaluates_or_says_why_in_one_line(tmp_path: Path) -> None:
+    """Issue 24 item 7, re-probed: with one picture a scene, `eval image --method fisher-bovw`
+    (the file-order split keeps each scene's only picture for training) ended in a reshape
+    traceback, and `eval fusion --policy learned` in a KeyError for the scene with no test
+    picture."""
+    lib = picture_library(tmp_path / "lib", per_scene=1)
+    outcome = run_cli("eval", "image", str(lib), "--method", "fisher-bovw")
+    assert_refused(outcome, "nothing to evaluate: the file-order split keeps every picture")
+    for k, scene in enumerate(("cafe", "gym")):  # recordings of three 5 s windows each
+        for i in range(2):
+            write_wav(lib / scene / f"r{i}.wav", tone(300 + 900 * k + 20 * i, 15.0, 8000), 8000)
+    fused = run_cli(
+        "eval", "fusion", str(lib), "--audio-method", "paper", "--image-method", "paper",
+        "--policy", "learned", "--drop-sense", "audio",
+    )  # fmt: skip
+    assert fused.code == 0, fused.err
+    assert "Traceback" not in fused.err
