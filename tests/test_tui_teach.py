@@ -109,20 +109,30 @@ async def test_a_pose_without_angles_is_refused_in_one_line(tmp_path, monkeypatc
         assert records.load_records() == []
 
 
-async def test_enter_records_window_after_window_from_the_keyboard(tmp_path, monkeypatch):
-    """A wearer on the keyboard: Enter on *Record 5 s*, and again once it is done. Disabling the
-    button while it recorded took the focus away, so the second Enter recorded nothing."""
+def noise_app(tmp_path, monkeypatch) -> ServantApp:
+    """The app over 12 s of replayed noise, with empty data and config dirs."""
     monkeypatch.setenv("SERVANT_DATA_DIR", str(tmp_path / "data"))
     monkeypatch.setenv("SERVANT_CONFIG_DIR", str(tmp_path / "config"))
     engine = ReplayEngine(window_source=noise_recording(12.0, 500.0, seed=3), audio_rate=RATE)
-    app = ServantApp(engine, library_root=tmp_path / "library")
+    return ServantApp(engine, library_root=tmp_path / "library")
+
+
+async def teaching_a_new_scene(pilot, app) -> TeachScreen:
+    """Teach mode open, a new scene named and used (the sound step shown)."""
+    await settle(pilot, lambda: app.engine.started.is_set())
+    await pilot.press("t")
+    await settle(pilot, lambda: isinstance(app.screen, TeachScreen))
+    await type_into(pilot, "#new-scene", "CoffeeScene")
+    await pilot.press("enter")
+    return app.screen
+
+
+async def test_enter_records_window_after_window_from_the_keyboard(tmp_path, monkeypatch):
+    """A wearer on the keyboard: Enter on *Record 5 s*, and again once it is done. Disabling the
+    button while it recorded took the focus away, so the second Enter recorded nothing."""
+    app = noise_app(tmp_path, monkeypatch)
     async with app.run_test(size=(120, 40)) as pilot:
-        await settle(pilot, lambda: engine.started.is_set())
-        await pilot.press("t")
-        await settle(pilot, lambda: isinstance(app.screen, TeachScreen))
-        screen = app.screen
-        await type_into(pilot, "#new-scene", "CoffeeScene")
-        await pilot.press("enter")
+        screen = await teaching_a_new_scene(pilot, app)
         screen.query_one("#record").focus()
         for k in (1, 2):
             await settle(pilot, lambda: not screen.query_one("#record").disabled)
@@ -137,17 +147,9 @@ async def test_keys_typed_in_a_burst_after_a_step_change_reach_the_step_shown(
     The app forwarded the digits to the focused control before Ctrl-N had bubbled up to the
     screen's binding, and the focus moved to the pose step only after the next refresh: the
     digits went to the hidden *Take picture* (a pose went unsaved in a tmux walk)."""
-    monkeypatch.setenv("SERVANT_DATA_DIR", str(tmp_path / "data"))
-    monkeypatch.setenv("SERVANT_CONFIG_DIR", str(tmp_path / "config"))
-    engine = ReplayEngine(window_source=noise_recording(12.0, 500.0, seed=3), audio_rate=RATE)
-    app = ServantApp(engine, library_root=tmp_path / "library")
+    app = noise_app(tmp_path, monkeypatch)
     async with app.run_test(size=(120, 40)) as pilot:
-        await settle(pilot, lambda: engine.started.is_set())
-        await pilot.press("t")
-        await settle(pilot, lambda: isinstance(app.screen, TeachScreen))
-        screen = app.screen
-        await type_into(pilot, "#new-scene", "CoffeeScene")
-        await pilot.press("enter")
+        screen = await teaching_a_new_scene(pilot, app)
         screen.go("pictures")
         await pilot.pause()
         # As the terminal driver does: every key posted before any is handled.

@@ -16,7 +16,7 @@ import sys
 import threading
 from typing import TYPE_CHECKING, Any
 
-from servant_core.cli import reader_gone, terminal_text
+from servant_core.cli import reader_gone, terminal_text, write_line
 from servant_core.cli.options import bounded_int, finite_float, sample_rate
 from servant_core.errors import ServantError
 from servant_core.senses import SAMPLE_SENSES
@@ -270,18 +270,12 @@ class _Printer:
         if text is None or self.gone.is_set():
             return
         try:
-            print(terminal_text(text), flush=True)
+            write_line(terminal_text(text))
         except BrokenPipeError:
             reader_gone()
             self.gone.set()
-        except OSError as exc:  # a full disk where the output is redirected: said once, then end
-            reason = exc.strerror or type(exc).__name__
-            print(
-                f"servant: error: cannot write the output ({reason}); "
-                "check where it is redirected to",
-                file=sys.stderr,
-            )
-            reader_gone()
+        except ServantError as error:  # a full disk where the output goes: said once, then end
+            print(f"servant: error: {error}", file=sys.stderr)
             self.failed = True
             self.gone.set()
 

@@ -181,8 +181,16 @@ def open_predict(recogniser: Any, X: np.ndarray) -> np.ndarray:
     place a row is likeliest (what the evaluation protocols score)."""
     names = np.asarray(recogniser.predict(X)).astype(object)
     if knows_elsewhere(recogniser):
-        names[open_probabilities(recogniser, X).sum(axis=1) <= 0.5] = UNKNOWN
+        names = elsewhere_unnamed(names, open_probabilities(recogniser, X))
     return names.astype(str)
+
+
+def elsewhere_unnamed(names: np.ndarray, open_p: np.ndarray) -> np.ndarray:
+    """`names` with `UNKNOWN` where somewhere else has half the probability or more (what is
+    left of each row of taught places' open probabilities `open_p`)."""
+    names = np.asarray(names, dtype=object).copy()
+    names[np.asarray(open_p).sum(axis=1) <= 0.5] = UNKNOWN
+    return names
 
 
 def answers(recogniser: Any, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

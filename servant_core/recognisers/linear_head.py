@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from sklearn.exceptions import NotFittedError
 
-from servant_core.recognisers.base import UNKNOWN
+from servant_core.recognisers.base import UNKNOWN, elsewhere_unnamed
 from servant_core.recognisers.centroids import SceneCentroids
 
 
@@ -73,7 +73,7 @@ class LinearHeadAnswers:
         open_p = np.asarray(self._open_proba(D), dtype=float)
         names = self._names(D)
         if self.knows_elsewhere:
-            names[open_p.sum(axis=1) <= 0.5] = UNKNOWN
+            names = elsewhere_unnamed(names, open_p)
         return names.astype(str), 100.0 * np.max(open_p, axis=1), open_p
 
     def confidence(self, X: np.ndarray) -> np.ndarray:
