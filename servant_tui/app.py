@@ -81,6 +81,11 @@ class ServantApp(App[None]):
         Binding("s", "settings", "Settings"),
         Binding("question_mark,f1", "help", "Help", key_display="?"),
         Binding("q", "quit", "Quit"),
+        # Priority: the app moves the focus before it forwards the next key of a burst (the
+        # angles "40", Tab, "100" typed quickly all went into the first field: a Tab bubbling up
+        # from the field ran only after the digits behind it had been given to that field)
+        Binding("tab", "focus_next", show=False, priority=True),
+        Binding("shift+tab", "focus_previous", show=False, priority=True),
     ]
 
     def __init__(

@@ -159,3 +159,21 @@ async def test_keys_typed_in_a_burst_after_a_step_change_reach_the_step_shown(
         assert screen.query_one(ContentSwitcher).current == "pose"
         first_joint = screen.query_one("#pose-form Input", Input)
         assert first_joint.value == "42", f"the digits went to {screen.focused!r}"
+
+
+async def test_angles_and_tabs_typed_in_a_burst_each_reach_their_field(tmp_path, monkeypatch):
+    """ "40", Tab, "100", Tab, "60" typed quickly (a tmux walk): the app gave the digits behind
+    each Tab to the first field before the Tab, bubbling up from it, moved the focus; all went
+    into the shoulder's field ("4010060")."""
+    app = noise_app(tmp_path, monkeypatch)
+    async with app.run_test(size=(120, 40)) as pilot:
+        screen = await teaching_a_new_scene(pilot, app)
+        screen.go("pose")
+        await pilot.pause()
+        for key, char in (("4", "4"), ("0", "0"), ("tab", "\t"), ("9", "9"), ("tab", "\t")):
+            app.post_message(events.Key(key, char))  # as the terminal driver: all before any
+        app.post_message(events.Key("6", "6"))
+        await pilot.pause(0.5)
+        values = [screen.query_one(f"#joint-{j}", Input).value for j in ("shoulder", "elbow")]
+        assert values == ["40", "9"], values
+        assert screen.query_one("#joint-wrist", Input).value == "6"
