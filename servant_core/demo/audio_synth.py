@@ -7,6 +7,8 @@ room (a decaying-noise impulse response: short and damped for a café, long for 
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from scipy.signal import butter, fftconvolve, sosfilt
 
@@ -24,16 +26,33 @@ def band_sos(low: float, high: float, rate: int, order: int = 2) -> np.ndarray:
     return butter(order, [low, min(high, 0.45 * rate)], btype="band", fs=rate, output="sos")
 
 
+@lru_cache(maxsize=32)
+def _fixed_sos(
+    order: int, cutoff: float | tuple[float, float], btype: str, rate: int
+) -> np.ndarray:
+    """A filter at a fixed cutoff, designed once: a scene uses the same few hundreds of times,
+    and designing one costs more than running it over a car's passing. Callers get it through
+    `_sos`, a copy: the cached array is never handed out."""
+    if isinstance(cutoff, tuple):
+        return band_sos(cutoff[0], cutoff[1], rate, order)
+    sos: np.ndarray = butter(order, cutoff, btype=btype, fs=rate, output="sos")
+    return sos
+
+
+def _sos(order: int, cutoff: float | tuple[float, float], btype: str, rate: int) -> np.ndarray:
+    return _fixed_sos(order, cutoff, btype, rate).copy()
+
+
 def bandpass(x: np.ndarray, low: float, high: float, rate: int, order: int = 2) -> np.ndarray:
-    return sosfilt(band_sos(low, high, rate, order), x)
+    return sosfilt(_sos(order, (low, high), "band", rate), x)
 
 
 def lowpass(x: np.ndarray, cutoff: float, rate: int, order: int = 2) -> np.ndarray:
-    return sosfilt(butter(order, cutoff, btype="low", fs=rate, output="sos"), x)
+    return sosfilt(_sos(order, cutoff, "low", rate), x)
 
 
 def highpass(x: np.ndarray, cutoff: float, rate: int, order: int = 2) -> np.ndarray:
-    return sosfilt(butter(order, cutoff, btype="high", fs=rate, output="sos"), x)
+    return sosfilt(_sos(order, cutoff, "high", rate), x)
 
 
 def place(track: np.ndarray, event: np.ndarray, at: int) -> None:

@@ -263,6 +263,7 @@ class Feeling:
         self.reopen_seconds = reopen_seconds
         self.ok = False
         self._rows: list[np.ndarray] = []  # blocks not yet cut into a window
+        self._rows_have = 0  # how many readings they hold
         self._kept: deque[np.ndarray] = deque()  # the last RING_SECONDS of blocks, for recording
         self._kept_rows = 0
         self._arrived = threading.Condition()
@@ -285,6 +286,7 @@ class Feeling:
             self.bus.report(self.device, False, str(error))
             return
         self._rows = []  # windows start afresh after (re)opening, as the sound's do
+        self._rows_have = 0
         self.ok = True
         self.bus.report(self.device, True, f"{self.source.name}: reading at {self.source.rate} Hz")
         if getattr(self.source, "live", False):  # a board: watched for stalls and its rate
@@ -347,13 +349,13 @@ class Feeling:
             channels = tuple(getattr(self.source, "channels", ()))
             self.bus.emit(SensorFrame(t, self.sense.name, channels, recent, self.source.rate))
         self._rows.append(block)
+        self._rows_have += len(block)
         size = int(round(self.window_seconds * self.source.rate))
-        have = sum(len(b) for b in self._rows)
-        while have >= size:
+        while self._rows_have >= size:
             rows = np.concatenate(self._rows)
             window, rest = rows[:size], rows[size:]
             self._rows = [rest] if len(rest) else []
-            have = len(rest)
+            self._rows_have = len(rest)
             self.on_window(self.sense.name, window, self.source.rate)
 
     def _keep(self, block: np.ndarray) -> None:
