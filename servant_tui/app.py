@@ -74,6 +74,7 @@ class ServantApp(App[None]):
     CSS_PATH = "app.tcss"
     # app.tcss lays the screens out tighter below 100 columns (80x24 must be usable)
     HORIZONTAL_BREAKPOINTS = [(0, "-narrow"), (100, "-wide")]
+    VERTICAL_BREAKPOINTS = [(0, "-short"), (30, "-tall")]
     BINDINGS = [
         Binding("a", "toggle_arm", "Arm/Disarm"),
         Binding("t", "teach", "Teach"),

@@ -6,6 +6,7 @@ import dataclasses
 import time
 
 import pytest
+from rich.console import Console
 
 from servant_core.errors import ServantError
 from servant_core.events import AcousticPrediction, ArmState, Decision, ErrorEvent, UnknownScene
@@ -207,3 +208,32 @@ async def test_the_log_keeps_a_confidence_and_its_unit_together(tmp_path):
     async with app.run_test(size=(80, 24)) as pilot:
         await settle(pilot, lambda: "detected" in log_text(app))
         assert "CoffeeScene detected (87.5%)" in log_text(app)
+
+
+async def test_at_80x24_the_spectrum_has_room_for_its_bars_and_the_arm_for_every_joint(tmp_path):
+    """Issue 22 item 12: at 80x24 the Spectrum pane was 5 rows (one row of bars under its 0 dB
+    line) while the arm's pane spent a row on its protocol. Now the arm leaves the protocol out
+    when one row short, and the spectrum takes the row: it is 6 rows, the arm 7."""
+    app = ServantApp(ReplayEngine(), library_root=tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await settle(pilot, lambda: app.engine.started.is_set() and app.live.scene.decisions)
+        await pilot.press("a")
+        await settle(pilot, lambda: app.arm_state.armed and app.arm_state.angles)
+        await pilot.pause()
+        assert app.live.spectrum.size.height >= 4  # the 0 dB line, two more rows, the Hz axis
+        arm = app.live.arm
+        console = Console(width=arm.size.width, record=True)
+        console.print(arm._render_state())
+        lines = console.export_text().rstrip("\n").splitlines()
+        assert len(lines) <= arm.size.height, lines  # nothing cut off at the bottom
+        shown = "\n".join(lines)
+        for word in ("link", "state", *app.arm_state.angles):
+            assert word in shown
+        assert "protocol" not in shown
+    app = ServantApp(ReplayEngine(), library_root=tmp_path)
+    async with app.run_test(size=(100, 30)) as pilot:  # where there is room, it is said
+        await settle(pilot, lambda: app.arm_state is not None and app.arm_state.angles)
+        await pilot.pause()
+        console = Console(width=app.live.arm.size.width, record=True)
+        console.print(app.live.arm._render_state())
+        assert "protocol" in console.export_text()

@@ -58,7 +58,11 @@ class ArmPane(Static):
             else Text("○ not connected", "red")
         )
         table.add_row("link", link, "")
-        table.add_row("protocol", Text(state.protocol or "–", "grey70"), "")
+        # the protocol is the line left out when the pane is one line short (80x24): the link,
+        # whether it is armed and every joint matter more
+        height = self.size.height
+        if not height or height >= 3 + len(state.angles):
+            table.add_row("protocol", Text(state.protocol or "–", "grey70"), "")
         armed = (
             Text(" ARMED ", "bold white on red")
             if state.armed
