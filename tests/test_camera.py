@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import cv2
 import numpy as np
 import pytest
@@ -104,3 +108,22 @@ def test_a_camera_that_fails_mid_run_is_reported_once_and_reopened(tmp_path):
     palettes = [e.t for e in events if isinstance(e, Palette)]
     assert any(t < 5 for t in palettes) and any(t > 16 for t in palettes)
     assert not any(6 < t < 15 for t in palettes)  # no picture while it was gone
+
+
+def test_an_image_sequence_that_cannot_be_opened_writes_nothing_to_the_terminal(tmp_path):
+    """FFmpeg's own line, `[image2 @ 0x…] Could find no file or sequence …`, went to stderr, where
+    the app draws its screen; the one line said is ours (a child process: the terminal's stderr
+    is what is checked, and OpenCV reads its FFmpeg log level once a process)."""
+    pattern = tmp_path / "pic%03d.png"
+    code = (
+        "from servant_core.capture.camera import Camera\n"
+        "from servant_core.errors import ServantError\n"
+        f"try:\n    Camera({str(pattern)!r}).open()\n"
+        "except ServantError as error:\n    print(error)\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "OPENCV_FFMPEG_LOGLEVEL"}
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, env=env
+    )
+    assert done.stderr == ""
+    assert "pic%03d.png" in done.stdout and len(done.stdout.splitlines()) == 1

@@ -18,6 +18,10 @@ from servant_core.errors import ServantError
 # OpenCV's own warnings ("can't open camera by index") go straight to the terminal, over the
 # application's screen; a camera that cannot be opened is said in one line of ours instead.
 cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+# FFmpeg's own log (AV_LOG_QUIET, -8) likewise: "[image2 @ 0x…] Could find no file or sequence"
+# landed on the app's screen when an image sequence could not be opened. OpenCV reads it at the
+# first FFmpeg open; a value the user set is kept.
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 
 
 def parse_camera(spec: int | str) -> int | str:
