@@ -177,3 +177,20 @@ async def test_angles_and_tabs_typed_in_a_burst_each_reach_their_field(tmp_path,
         values = [screen.query_one(f"#joint-{j}", Input).value for j in ("shoulder", "elbow")]
         assert values == ["40", "9"], values
         assert screen.query_one("#joint-wrist", Input).value == "6"
+
+
+async def test_every_enter_on_take_picture_takes_a_picture_however_quick(tmp_path, monkeypatch):
+    """Textual ignores a button's press within 0.2 s of the last (its press animation, ended by
+    a timer). A wearer pressing Enter twice quickly got one picture; in the README walk under
+    load (`make test` on two workers) the timer ran late and the second picture, asked after
+    the first was on the screen, was never taken."""
+    app = noise_app(tmp_path, monkeypatch)
+    async with app.run_test(size=(120, 40)) as pilot:
+        screen = await teaching_a_new_scene(pilot, app)
+        await pilot.press("ctrl+n")
+        await settle(pilot, lambda: app.focused is not None and app.focused.id == "take-picture")
+        await pilot.press("enter", "enter", "enter")
+        await settle(pilot, lambda: screen.pictures == 3)
+        await pilot.pause(0.5)
+        assert screen.pictures == 3
+        assert len(list((tmp_path / "library" / "CoffeeScene").glob("*.png"))) == 3

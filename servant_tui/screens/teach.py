@@ -87,6 +87,15 @@ STATUS_OF_WORK = {
 }
 
 
+def every_press(button: Button) -> Button:
+    """`button`, each press of which counts. Textual ignores a press within its press animation
+    (0.2 s, ended by a timer): two quick Enters on *Take picture* took one picture, and on a
+    loaded machine, where the timer ran late, a press after the first picture was on the screen
+    was lost."""
+    button.active_effect_duration = 0
+    return button
+
+
 class TeachScreen(ReportsWorkerErrors, Screen[None]):
     BINDINGS = [
         Binding("escape", "app.pop_screen", "Back"),
@@ -151,8 +160,10 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
                         f"Record {DEFAULT_WINDOW_SECONDS:g} s of the place's sound"
                         f"{self._with_senses()}. Record a few."
                     )
-                    yield Button(
-                        f"Record {DEFAULT_WINDOW_SECONDS:g} s", id="record", variant="primary"
+                    yield every_press(
+                        Button(
+                            f"Record {DEFAULT_WINDOW_SECONDS:g} s", id="record", variant="primary"
+                        )
                     )
                     yield ProgressBar(
                         total=DEFAULT_WINDOW_SECONDS, show_eta=False, id="record-progress"
@@ -163,7 +174,7 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
                     yield Label(
                         "Take pictures of the place (the camera's dominant colours are learnt)."
                     )
-                    yield Button("Take picture", id="take-picture", variant="primary")
+                    yield every_press(Button("Take picture", id="take-picture", variant="primary"))
                     yield Static(id="picture-status")
                 with Vertical(id="pose"):
                     yield Label("The arm's pose for this scene: type the angles, or guide the arm.")
@@ -173,7 +184,7 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
                             yield Input(id=f"joint-{joint}", type="number", placeholder="degrees")
                     with Horizontal(classes="buttons"):
                         yield Button("Use the arm's pose", id="guided")
-                        yield Button("Add sample", id="add-sample", variant="primary")
+                        yield every_press(Button("Add sample", id="add-sample", variant="primary"))
                         yield Button("Teach another scene", id="again")
                     yield DataTable(id="samples", cursor_type="row")
                     yield Label("A wrong sample? Select it and press delete.", classes="hint")
