@@ -30,7 +30,7 @@ demo: setup
 test: setup
 	@if [ -x $(VMIC) ]; then bash $(VMIC) install || true; fi
 	@if [ -x $(VMIC) ] && vmic_env=$$(bash $(VMIC) start 2>/dev/null); then eval "$$vmic_env"; fi; \
-	PATH="$(abspath $(VENV))/bin:$$PATH" $(PY) -m pytest -q -p no:cacheprovider --durations=30
+	PATH="$(abspath $(VENV))/bin:$$PATH" $(PY) -m pytest -q -p no:cacheprovider --durations=30 -n 2 --dist loadgroup
 
 bench: setup
 	for b in bench/*.py; do $(PY) $$b || exit 1; done

@@ -16,6 +16,24 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
+# The files whose tests play into the virtual microphone's one null sink, or listen to it: under
+# pytest-xdist they run on one worker, one at a time, so no test hears another's sound.
+ONE_MICROPHONE = {
+    "test_live_path.py",
+    "test_microphone.py",
+    "test_readme_walk.py",
+    "test_tui_settings_devices.py",
+}
+
+
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own hook reads the groups
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """`make test` runs the suite on two workers (`-n 2 --dist loadgroup`): a file's tests stay
+    together on one worker (some share a fixed path, such as the snapshots' library), and the
+    files of `ONE_MICROPHONE` share one worker."""
+    for item in items:
+        name = item.path.name
+        item.add_marker(pytest.mark.xdist_group("microphone" if name in ONE_MICROPHONE else name))
 
 
 def shared_data_dir() -> Path | None:
