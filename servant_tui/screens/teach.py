@@ -6,6 +6,7 @@ each pose becomes a teach record. Training shows the action learner's error fall
 
 from __future__ import annotations
 
+import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from datetime import datetime
@@ -116,6 +117,7 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
         self.spectrum = Spectrum(id="teach-spectrum")
         self._recording_started: float | None = None
         self._samples: dict[str, Any] = {}  # the samples table's rows: key -> teach record
+        self._one_picture_at_a_time = threading.Lock()
 
     @property
     def root(self) -> Path:
@@ -390,13 +392,16 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
         if scene is not None:
             self.take_picture(scene)
 
-    @work(thread=True, exclusive=True, group="picture", exit_on_error=False)
+    # not exclusive: each press is a picture (an exclusive worker cancelled the one before it,
+    # so three quick Enters took one); taken one at a time, each under its own time stamp
+    @work(thread=True, group="picture", exit_on_error=False)
     def take_picture(self, scene: str) -> None:
-        frame = self.app.engine.take_picture()
-        ok, png = cv2.imencode(".png", frame)
-        if not ok:
-            raise ServantError("camera: the picture could not be encoded; try again")
-        path = atomic_write_bytes(self.root / scene / f"{stamp()}.png", png.tobytes())
+        with self._one_picture_at_a_time:
+            frame = self.app.engine.take_picture()
+            ok, png = cv2.imencode(".png", frame)
+            if not ok:
+                raise ServantError("camera: the picture could not be encoded; try again")
+            path = atomic_write_bytes(self.root / scene / f"{stamp()}.png", png.tobytes())
         colours, shares = dominant_colours(frame)
         self.post_message(PictureTaken(path, colours, shares))
 
