@@ -7,6 +7,7 @@ import pytest
 from textual import events
 from textual.widgets import ContentSwitcher, DataTable, Input, Sparkline
 
+from servant_core.audio import write_wav
 from servant_tui.app import ServantApp
 from servant_tui.screens.teach import TeachScreen
 from tests.test_tui_live import settle
@@ -198,3 +199,25 @@ async def test_every_enter_on_take_picture_takes_a_picture_however_quick(tmp_pat
         await pilot.pause(0.5)
         assert screen.pictures == 5
         assert len(list((tmp_path / "library" / "CoffeeScene").glob("*.png"))) == 5
+
+
+async def test_a_name_typed_when_scenes_are_known_goes_into_the_new_names_field(
+    tmp_path, monkeypatch
+):
+    """Once a scene is known, teach mode opens on the known scenes' list. A returning wearer
+    typing the new place's name and Enter (the README: "press t, name it") saw nothing happen:
+    the list took the letters, and Enter opened it."""
+    app = noise_app(tmp_path, monkeypatch)
+    (tmp_path / "library" / "cafe").mkdir(parents=True)
+    write_wav(tmp_path / "library" / "cafe" / "one.wav", noise_recording(5.0, 500.0, seed=1), RATE)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await settle(pilot, lambda: app.engine.started.is_set())
+        await pilot.press("t")
+        await settle(pilot, lambda: isinstance(app.screen, TeachScreen))
+        screen = app.screen
+        assert screen.focused.id == "known"
+        for char in "street":  # as the terminal driver does: all posted before any is handled
+            app.post_message(events.Key(char, char))
+        app.post_message(events.Key("enter", "\r"))
+        await settle(pilot, lambda: screen.scene is not None)
+        assert screen.scene == "street"

@@ -16,7 +16,7 @@ from typing import Any
 import cv2
 import numpy as np
 from rich.text import Text
-from textual import on, work
+from textual import events, on, work
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Grid, Horizontal, Vertical
@@ -88,6 +88,23 @@ STATUS_OF_WORK = {
 }
 
 
+class KnownScenes(Select[str]):
+    """The known scenes' list, where teach mode opens once a scene is known. A name typed at it
+    goes into the new name's field, and the Enter after it names the scene: a returning wearer
+    typing the new place's name (the README: "press t, name it") saw nothing happen, the list
+    took the letters and Enter opened it. Keys come from the terminal in a burst, all given to
+    the list before the first moves the focus, so every letter the list gets is passed on."""
+
+    def on_key(self, event: events.Key) -> None:
+        typed = event.character or ""
+        if self.expanded or not typed.isprintable() or not typed or typed.isspace():
+            return  # Enter, space and the arrows still open the list
+        field = self.screen.query_one("#new-scene", Input)
+        self.screen.set_focus(field)
+        field.insert_text_at_cursor(typed)
+        event.stop()
+
+
 def every_press(button: Button) -> Button:
     """`button`, each press of which counts. Textual ignores a press within its press animation
     (0.2 s, ended by a timer): two quick Enters on *Take picture* took one picture, and on a
@@ -154,7 +171,7 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
             with ContentSwitcher(initial="scene", id="step"):
                 with Vertical(id="scene"):
                     yield Label("Pick the scene you are in, or name a new one.")
-                    yield Select([(s, s) for s in scenes], prompt="known scenes", id="known")
+                    yield KnownScenes([(s, s) for s in scenes], prompt="known scenes", id="known")
                     yield Input(placeholder="new scene name, e.g. CoffeeScene", id="new-scene")
                     yield Button("Use this scene", id="use-scene", variant="primary")
                 with Vertical(id="sound"):
