@@ -172,7 +172,11 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
                 with Vertical(id="scene"):
                     yield Label("Pick the scene you are in, or name a new one.")
                     yield KnownScenes([(s, s) for s in scenes], prompt="known scenes", id="known")
-                    yield Input(placeholder="new scene name, e.g. CoffeeScene", id="new-scene")
+                    yield Input(
+                        placeholder="new scene name, e.g. CoffeeScene",
+                        id="new-scene",
+                        select_on_focus=False,  # a letter the known scenes passed on stays
+                    )
                     yield Button("Use this scene", id="use-scene", variant="primary")
                 with Vertical(id="sound"):
                     yield Label(
