@@ -97,7 +97,7 @@ class KnownScenes(Select[str]):
 
     def on_key(self, event: events.Key) -> None:
         typed = event.character or ""
-        if self.expanded or not typed.isprintable() or not typed or typed.isspace():
+        if self.expanded or not (typed.isprintable() and typed.strip()):
             return  # Enter, space and the arrows still open the list
         field = self.screen.query_one("#new-scene", Input)
         self.screen.set_focus(field)
