@@ -20,7 +20,7 @@ from servant_core.demo.scenes import (
     walk_length,
 )
 from servant_core.engine import build_demo_engine
-from servant_core.events import AcousticPrediction, Decision, VisualPrediction
+from servant_core.events import AcousticPrediction, Decision, SensePrediction, VisualPrediction
 from servant_core.recognisers.base import answers, open_predict, open_probabilities
 from tests.conftest import servant
 
@@ -111,6 +111,25 @@ def test_walk_is_deterministic_and_shows_detections_mismatch_and_no_scene():
     end = start + WALK[2].seconds - 5.0
     assert all(scene is None for t, scene in decisions if start + 5 < t < end)
     assert segment_at(start).sound == "street" and segment_at(start).sight == "coffee"
+
+
+def test_the_fast_walks_motion_and_ambient_windows_end_with_its_sound_windows():
+    """As fast as possible the walk goes on in 0.1 s blocks (FAST_BLOCK_SECONDS): the sensors,
+    which follow the sound's clock, take a block of theirs for each, so every sense's window
+    ends when the sound's does and not later and later (with the sensors at 20 ms blocks their
+    windows fell behind: one of six came in 30 s)."""
+    engine = build_demo_engine(seed=0, realtime=False, arm=False)
+    events: list = []
+    engine.subscribe(events.append)
+    engine.run_until(30.0)
+    engine.stop()
+    heard = [round(e.t, 6) for e in events if isinstance(e, AcousticPrediction)]
+    assert heard == [5.0, 10.0, 15.0, 20.0, 25.0, 30.0]
+    for sense in ("motion", "ambient"):
+        felt = [
+            round(e.t, 6) for e in events if isinstance(e, SensePrediction) and e.sense == sense
+        ]
+        assert felt == heard, sense
 
 
 def demo_lines(*options: str) -> list[str]:

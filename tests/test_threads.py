@@ -1,13 +1,20 @@
 """The numerical libraries' pools are one thread in Servant's processes, unless the user's
-environment sizes them (servant_core.threads)."""
+environment sizes them; start-up work runs on a thread a core, its results in order
+(servant_core.threads)."""
 
 from __future__ import annotations
 
 import os
 import subprocess
 import sys
+import threading
+import time
 
-from servant_core.threads import POOLS, one_thread_pools
+import numpy as np
+import pytest
+
+from servant_core.demo.scenes import SCENES, TRAIN, synth_picture, synth_window, training_set
+from servant_core.threads import POOLS, one_thread_pools, results_in_order
 
 PROBE = """
 import os, sys
@@ -50,3 +57,47 @@ def test_the_engines_tested_in_this_process_have_one_thread_pools_too():
 
     sizes = {i["internal_api"]: i["num_threads"] for i in threadpoolctl.threadpool_info()}
     assert sizes.get("openblas") == 1, sizes
+
+
+def test_results_come_in_the_jobs_order_whichever_ends_first():
+    def job(value, delay):
+        return lambda: (time.sleep(delay), value)[1]
+
+    jobs = [job("slow", 0.2), job("quick", 0.0), job("middling", 0.05)]
+    assert list(results_in_order(jobs)) == ["slow", "quick", "middling"]
+
+
+def test_a_failing_job_raises_where_its_result_is_due_and_the_rest_are_not_begun():
+    begun = []
+
+    def failing():
+        raise ValueError("no such scene")
+
+    def later(i):
+        def run():
+            begun.append(i)
+            time.sleep(0.05)
+            return i
+
+        return run
+
+    gate = threading.Event()
+    jobs = [lambda: gate.wait(5) and "first", failing, *(later(i) for i in range(20))]
+    results = results_in_order(jobs)
+    gate.set()
+    assert next(results) == "first"
+    with pytest.raises(ValueError, match="no such scene"):
+        next(results)  # and the jobs not yet begun are cancelled, not run
+    assert len(begun) < 20
+
+
+def test_the_demo_training_set_is_the_same_on_threads_as_made_one_by_one():
+    windows, window_scenes, pictures, picture_scenes = training_set(3, 2, 2)
+    i = 0
+    for s, scene in enumerate(SCENES):
+        for k in range(2):
+            alone = synth_window(scene, np.random.default_rng([3, TRAIN, s, 0, k]))
+            assert np.array_equal(windows[i], alone) and window_scenes[i] == scene
+            picture = synth_picture(scene, np.random.default_rng([3, TRAIN, s, 1, k]))
+            assert np.array_equal(pictures[i], picture) and picture_scenes[i] == scene
+            i += 1

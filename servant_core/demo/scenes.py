@@ -16,6 +16,7 @@ policy judges a window after it ends, so each clean change of place confirms at 
 
 from __future__ import annotations
 
+import functools
 import itertools
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -26,12 +27,13 @@ import cv2
 import numpy as np
 
 from servant_core.audio import DEFAULT_WINDOW_SECONDS, write_wav
-from servant_core.capture.replay import Clip, PacedAudio
+from servant_core.capture.replay import DEFAULT_BLOCK_SECONDS, Clip, PacedAudio
 from servant_core.demo.audio_synth import DEMO_RATE, SCENE_SOUNDS
 from servant_core.demo.picture_synth import SCENE_PICTURES
 from servant_core.recognisers import FRESH_METHODS, make_recogniser
 from servant_core.recognisers.paper import PaperAcousticRecogniser, PaperVisualRecogniser
 from servant_core.storage import atomic_write_bytes
+from servant_core.threads import results_in_order
 
 SCENES = ("coffee", "gym", "street")
 TRAIN, WALK_STREAM = 1, 2  # the first seed word after the user's seed: which stream of randomness
@@ -102,14 +104,22 @@ def training_set(
 ) -> TrainingSet:
     """(windows (n, samples) at DEMO_RATE, their scenes, pictures, their scenes);
     `on_progress(done, total)` after each scene's windows and pictures."""
+    jobs = [
+        functools.partial(make, scene, np.random.default_rng([seed, TRAIN, s, kind, i]))
+        for s, scene in enumerate(SCENES)
+        for kind, make, count in (
+            (0, synth_window, windows_per_scene),
+            (1, synth_picture, pictures_per_scene),
+        )
+        for i in range(count)
+    ]
+    made = results_in_order(jobs)  # each seeded on its own: the same whatever the threads
     windows, window_scenes, pictures, picture_scenes = [], [], [], []
     for s, scene in enumerate(SCENES):
-        for i in range(windows_per_scene):
-            windows.append(synth_window(scene, np.random.default_rng([seed, TRAIN, s, 0, i])))
-            window_scenes.append(scene)
-        for i in range(pictures_per_scene):
-            pictures.append(synth_picture(scene, np.random.default_rng([seed, TRAIN, s, 1, i])))
-            picture_scenes.append(scene)
+        windows += [next(made) for _ in range(windows_per_scene)]
+        window_scenes += [scene] * windows_per_scene
+        pictures += [next(made) for _ in range(pictures_per_scene)]
+        picture_scenes += [scene] * pictures_per_scene
         if on_progress is not None:
             on_progress(s + 1, len(SCENES))
     return np.stack(windows), window_scenes, pictures, picture_scenes
@@ -165,10 +175,14 @@ def train_demo_recognisers(
         report(len(SCENES))
     windows, window_scenes, pictures, picture_scenes = training
     acoustic, visual = demo_recognisers(seed, paper=paper)
-    acoustic.fit(acoustic.featurize(windows), window_scenes)
-    report(len(SCENES) + FIT_STEPS)
-    visual.fit(visual.featurize(pictures), picture_scenes)
-    report(total)
+    fits = results_in_order(
+        [
+            lambda: acoustic.fit(acoustic.featurize(windows), window_scenes),
+            lambda: visual.fit(visual.featurize(pictures), picture_scenes),
+        ]
+    )
+    for done, _ in enumerate(fits, 1):
+        report(len(SCENES) + done * FIT_STEPS)
     return acoustic, visual
 
 
@@ -197,10 +211,21 @@ def walk_clips(seed: int = 0, walk: tuple[Segment, ...] = WALK) -> Iterator[Clip
         yield Clip(scene, synth_window(scene, rng))
 
 
+# As fast as possible the walk goes on in blocks of 0.1 s, not a microphone's 20 ms: each block is a
+# round of the engine's loop (the camera's, the sensors' and the fusion's turns), and the demo's
+# events are still on a 0.1 s grid (a picture is of the walk's time to 0.1 s; windows are 5 s).
+FAST_BLOCK_SECONDS = 0.1
+
+
 def demo_audio(seed: int = 0, *, realtime: bool = True, clock=None) -> PacedAudio:
     """The walk's sound as an audio source (at real speed, or as fast as possible on `clock`)."""
     return PacedAudio(
-        walk_clips(seed), DEMO_RATE, realtime=realtime, clock=clock, name="demo sound"
+        walk_clips(seed),
+        DEMO_RATE,
+        realtime=realtime,
+        clock=clock,
+        block_seconds=DEFAULT_BLOCK_SECONDS if realtime else FAST_BLOCK_SECONDS,
+        name="demo sound",
     )
 
 

@@ -23,7 +23,7 @@ from servant_core.capture.sensor_emulator import SENSOR_STREAM, SensorEmulator, 
 from servant_core.capture.sensors import CHANNELS, RATES, SensorBoard
 from servant_core.capture.source import ManualClock, SampleSource
 from servant_core.demo.motion_synth import DEMO_SCENES, synth_ambient, synth_motion
-from servant_core.demo.scenes import WALK, Segment, segment_at
+from servant_core.demo.scenes import FAST_BLOCK_SECONDS, WALK, Segment, segment_at
 from servant_core.recognisers import FRESH_METHODS, Recogniser, make_recogniser
 
 TRAIN_STREAM = 7  # the seed word of the sensors' training windows: never the walk's
@@ -72,6 +72,7 @@ def demo_sensor_sources(
                 CHANNELS[STREAM[sense]],
                 follow=clock,
                 realtime=False,
+                block_seconds=FAST_BLOCK_SECONDS,  # a block for each of the sound's
                 name=f"demo {sense}",
             )
             for sense in SYNTH
