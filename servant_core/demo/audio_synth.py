@@ -26,7 +26,10 @@ def band_sos(low: float, high: float, rate: int, order: int = 2) -> np.ndarray:
     return butter(order, [low, min(high, 0.45 * rate)], btype="band", fs=rate, output="sos")
 
 
-def formant(low: float, high: float, rate: int) -> tuple[np.ndarray, np.ndarray]:
+Formant = tuple[np.ndarray, np.ndarray]  # a filter's (b, a)
+
+
+def formant(low: float, high: float, rate: int) -> Formant:
     """A voice's formant: `band_sos`'s filter as (b, a), designed in half the time. A voice
     designs eight at random frequencies, and at this order the two agree to 1e-10."""
     b, a = butter(2, [low, high], btype="band", fs=rate, output="ba")
@@ -92,7 +95,7 @@ def voice(
     phase = np.cumsum(pitch / rate)
     source = (phase % 1.0 < 0.08).astype(float) + 0.02 * rng.standard_normal(len(t))
     formants = [(rng.uniform(300, 800), rng.uniform(900, 2500)) for _ in range(4)]
-    vowels: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    vowels: dict[int, tuple[Formant, Formant]] = {}
     lead = int(VOWEL_LEAD_S * rate)
     out = np.zeros(len(t))
     syllable = int(rate / rng.uniform(3.5, 5.5))
