@@ -175,14 +175,10 @@ def train_demo_recognisers(
         report(len(SCENES))
     windows, window_scenes, pictures, picture_scenes = training
     acoustic, visual = demo_recognisers(seed, paper=paper)
-    fits = results_in_order(
-        [
-            lambda: acoustic.fit(acoustic.featurize(windows), window_scenes),
-            lambda: visual.fit(visual.featurize(pictures), picture_scenes),
-        ]
-    )
-    for done, _ in enumerate(fits, 1):
-        report(len(SCENES) + done * FIT_STEPS)
+    acoustic.fit(acoustic.featurize(windows), window_scenes)
+    report(len(SCENES) + FIT_STEPS)
+    visual.fit(visual.featurize(pictures), picture_scenes)
+    report(total)
     return acoustic, visual
 
 
