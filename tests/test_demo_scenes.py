@@ -132,6 +132,20 @@ def test_the_fast_walks_motion_and_ambient_windows_end_with_its_sound_windows():
         assert felt == heard, sense
 
 
+def test_the_printed_demo_writes_no_library_but_keeps_its_labels_out_of_the_users(tmp_path):
+    """`servant demo --headless` has no library screen and no retrain: the training scenes are
+    not written (0.3 s of its start-up), yet a place labelled would go to its throw-away
+    library, never to the user's data."""
+    written = build_demo_engine(seed=0, realtime=False, arm=False, library_root=tmp_path / "a")
+    written.stop()
+    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == list(SCENES)
+    engine = build_demo_engine(
+        seed=0, realtime=False, arm=False, library_root=tmp_path / "b", write_library=False
+    )
+    engine.stop()
+    assert not (tmp_path / "b").exists() and engine.library_root == tmp_path / "b"
+
+
 def demo_lines(*options: str) -> list[str]:
     result = servant("demo", "--headless", "--fast", *options)
     assert result.returncode == 0, result.stderr

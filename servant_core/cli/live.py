@@ -216,6 +216,7 @@ def run_demo(args: argparse.Namespace) -> int:
             realtime=not args.fast,
             paper=args.paper,
             library_root=space / "library",
+            write_library=False,  # printed lines have no library screen and no retrain
             policy=args.policy,
         )
         if args.fast:

@@ -36,6 +36,7 @@ def build_demo_engine(
     realtime: bool = True,
     fusion: FusionPolicy | None = None,
     library_root: str | Path | None = None,
+    write_library: bool = True,
     arm: bool = True,
     paper: bool = False,
     on_progress: Callable[[int, int], None] | None = None,
@@ -48,7 +49,9 @@ def build_demo_engine(
     With `arm`, an emulated arm (`servant_core.demo.arm`), disarmed, that the engine closes when
     it stops. With `library_root`, the demo's training scenes are written there as a scene
     library (the demo's own throw-away space: see `servant_core.demo.space`), for the library
-    screen and retrains. `on_progress(done, total)` follows the training (the slow part).
+    screen and retrains (`write_library=False`: not written, for a front end with neither; a
+    place labelled still goes there). `on_progress(done, total)` follows the training (the slow
+    part).
     `policy` names the fusion policy (default: as above); "learned" teaches its net on the
     demo's library first (a few seconds more).
 
@@ -84,7 +87,7 @@ def build_demo_engine(
         seed, clock=clock if isinstance(clock, ManualClock) and not realtime else None
     )
     sensing = train_sensor_recognisers(seed)
-    if library_root is not None:
+    if library_root is not None and write_library:
         write_demo_library(library_root, seed, training)
         write_sensor_library(library_root, seed)
     audio = demo_audio(seed, realtime=realtime, clock=clock if not realtime else None)
