@@ -32,12 +32,12 @@ def results_in_order(jobs: Sequence[Callable[[], T]]) -> Iterator[T]:
     """Each job's result, in the jobs' order, the jobs run on a thread a core meanwhile.
 
     For start-up work that is mostly numpy and scipy, which let go of the interpreter's lock in
-    their large calls: on the project's two cores the demo's training scenes are synthesised in
-    0.8 s instead of 1.3 s. (Its two fits side by side saved another 0.6 s, but each thread that
-    calls the BLAS gets a buffer of its own, and the app's peak memory went 244 → 258 MB, past
-    its 250 MB target: they stay one after the other.) A job's exception is raised where its
-    result is due; a reader that stops early, or an interrupt, cancels the jobs not yet begun
-    and waits for the running ones.
+    their large calls: on the project's two cores the demo's training scenes were synthesised in
+    1.15 s instead of 1.7 s (before their formants were made cheaper). Its two fits side by side
+    saved another 0.6 s, but each thread that calls the BLAS gets a buffer of its own, and the
+    app's peak memory went 244 → 258 MB, past its 250 MB target: they stay one after the other.
+    A job's exception is raised where its result is due; a reader that stops early, or an
+    interrupt, cancels the jobs not yet begun and waits for the running ones.
     """
     workers = max(1, min(len(jobs), os.cpu_count() or 1))
     pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="servant-start")
