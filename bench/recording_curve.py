@@ -42,6 +42,7 @@ from servant_core.cli import library_noise_silenced  # noqa: E402
 from servant_core.evaluate import source_of  # noqa: E402
 from servant_core.library import SceneLibrary, WindowFeatures  # noqa: E402
 from servant_core.recognisers import make_audio_recogniser  # noqa: E402
+from servant_core.recognisers.base import fit_visits  # noqa: E402
 
 METHOD = "kmeans-encoder"
 
@@ -92,7 +93,9 @@ def curve(
         for left_out, train in plan:
             fit_rows = np.isin(wf.recording, train)
             test_rows = wf.recording == left_out
-            model = make().fit(wf.features[fit_rows], wf.scenes[fit_rows])
+            model = fit_visits(
+                make(), wf.features[fit_rows], wf.scenes[fit_rows], wf.recording[fit_rows]
+            )
             said += [str(s) for s in model.predict(wf.features[test_rows])]
             truth += [str(s) for s in wf.scenes[test_rows]]
         figures.append(float(balanced_accuracy_score(truth, said)))

@@ -43,6 +43,7 @@ from servant_core.library import (
     featurize_recordings,
     iter_recording_windows,
     read_pictures,
+    visits_of,
 )
 from servant_core.recognisers import (
     UNKNOWN,
@@ -53,7 +54,7 @@ from servant_core.recognisers import (
     methods_for,
 )
 from servant_core.recognisers.background import kept_out
-from servant_core.recognisers.base import open_predict, open_probabilities
+from servant_core.recognisers.base import fit_visits, open_predict, open_probabilities
 from servant_core.storage import read_bounded_bytes
 
 PROTOCOLS = EVAL_PROTOCOLS
@@ -339,11 +340,12 @@ def _evaluate_folds(
     skipped: list[str] = []
     folds: list[dict[str, Any]] = []
     n_train = 0
+    visits = visits_of(wf)
     for i, (train, test) in enumerate(zip(plan.folds, plan.tests, strict=True)):
         if plan.left_out is not None:
             folds.append(_fold_summary(wf, train, test, plan.left_out[i], names))
         try:
-            model = make_model().fit(wf.features[train], wf.scenes[train])
+            model = fit_visits(make_model(), wf.features[train], wf.scenes[train], visits[train])
         except ServantError as error:
             if len(plan.folds) == 1:
                 raise
@@ -627,7 +629,7 @@ def fit_paired(
     train = (
         np.ones(len(wf.scenes), bool) if train_on_all else temporal_split(wf.recording, wf.position)
     )
-    audio.fit(wf.features[train], wf.scenes[train])
+    fit_visits(audio, wf.features[train], wf.scenes[train], visits_of(wf)[train])
     visual = make_recogniser("image", visual_method)
     X, kept = _pictures_and_features(visual, library.pictures, on_error)
     p_train = (

@@ -28,6 +28,9 @@ from servant_core.storage import open_regular_file, os_reason, walk_files
 # A webcam frame is under 1 Mpx and a phone photo under 50 Mpx; a header claiming more is
 # damaged or hostile (a 1 MB PNG can claim gigabytes). Checked before decoding.
 MAX_PICTURE_PIXELS = 50_000_000
+# One-window recordings of a place (teach mode's presses, windows labelled live) made no more than
+# this apart are one visit (`visits_of`).
+VISIT_GAP_SECONDS = 30 * 60
 MAX_PICTURE_BYTES = 64 * 1024 * 1024
 
 ProgressCallback = Callable[[int, int], None]
@@ -131,6 +134,31 @@ class WindowFeatures:
     recording: np.ndarray  # (n,) int, index into `recordings`
     position: np.ndarray  # (n,) int, the window's index within its recording
     recordings: list[Recording]
+
+
+def visits_of(wf: WindowFeatures) -> np.ndarray:
+    """(n,) int: the visit each window comes from, for a recogniser that learns a place's visits
+    apart (`kmeans-encoder`). A recording longer than one window is a visit of its own (a file
+    of a library, recorded in one go). One-window recordings of a place, teach mode's presses,
+    are one visit while each was made within `VISIT_GAP_SECONDS` of the one before (by their
+    files' modification times): three presses at the café are one visit, a press there a week
+    later another. A file whose time cannot be read is a visit of its own."""
+    windows = np.bincount(wf.recording, minlength=len(wf.recordings))
+    visit = np.arange(len(wf.recordings))
+    presses: dict[str, list[tuple[float, int]]] = {}
+    for index in np.flatnonzero(windows == 1).tolist():
+        recording = wf.recordings[index]
+        try:
+            made = recording.path.stat().st_mtime
+        except OSError:
+            continue
+        presses.setdefault(recording.scene, []).append((made, index))
+    for made_at in presses.values():
+        made_at.sort()
+        for (before, previous), (made, index) in zip(made_at, made_at[1:], strict=False):
+            if made - before <= VISIT_GAP_SECONDS:
+                visit[index] = visit[previous]
+    return visit[wf.recording]
 
 
 def iter_recording_windows(

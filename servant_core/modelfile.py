@@ -375,8 +375,9 @@ def _check_scenes(state: dict[str, Any]) -> None:
         raise ValueError("its scenes are not a list of two or more distinct names")
 
 
-# arrays that hold text: the scene of each training row a method keeps for its fold-in
-TEXT_ARRAYS = {"train_scenes"}
+# arrays that hold text: the scene and the visit of each training row a method keeps for its
+# fold-in, and the place of each row of a head that learns a place's visits apart
+TEXT_ARRAYS = {"train_scenes", "train_visits", "mode_scenes"}
 
 
 def _check_arrays(parts: dict[str, np.ndarray]) -> None:

@@ -285,3 +285,157 @@ def test_few_shot_on_the_real_recordings(shared_data, tmp_path) -> None:
     library = SceneLibrary.scan(link_library(tmp_path / "lib", shared_data, subset))
     result = evaluate_audio(library, "kmeans-encoder", "fewshot", shots=(3,))
     assert result["rows"][0]["balanced_accuracy"] >= 0.92  # issue 11's target (0.880 before)
+
+
+# -- a place taught on several visits ----------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def visited(trained) -> KMeansEncoderAcousticRecogniser:
+    """`outside` taught on two visits (a low hum six windows long, a hiss once), `inside` on one."""
+    _, scenes = trained
+    model = KMeansEncoderAcousticRecogniser(**SMALL)
+    X = model.featurize(np.concatenate([scenes["low"], scenes["high"][:1], scenes["mid"][:3]]))
+    scenes_ = ["outside"] * 7 + ["inside"] * 3
+    return model.fit(X, scenes_, visits=["hum"] * 6 + ["hiss"] + ["in"] * 3)
+
+
+def test_each_visit_of_a_place_is_a_row_of_the_head(visited) -> None:
+    assert visited.scenes_ == ["inside", "outside"]
+    assert sorted(visited.mode_scenes_.tolist()) == ["inside", "outside", "outside"]
+    assert visited.coef_.shape[0] == 3
+
+
+def test_a_place_is_its_likeliest_visit_and_open_is_all_its_visits_together(
+    visited, trained
+) -> None:
+    """`predict_proba`: each place's likeliest visit, shares renormalised; `open_proba`: the
+    probability of the place and not elsewhere, its visits summed."""
+    from servant_core.recognisers.kmeans_encoder import softmax_proba
+
+    _, scenes = trained
+    D = visited.descriptors(visited.featurize(scenes["high"][1:4]))
+    rows = np.vstack([visited.coef_, visited.elsewhere_coef_])
+    intercept = np.concatenate([visited.intercept_, visited.elsewhere_intercept_])
+    closed = softmax_proba((D @ visited.coef_.T + visited.intercept_) / visited.temperature)
+    opened = softmax_proba((D @ rows.T + intercept) / visited.temperature)[:, :3]
+    outside = visited.mode_scenes_ == "outside"
+    best = np.stack([closed[:, ~outside].max(axis=1), closed[:, outside].max(axis=1)], axis=1)
+    np.testing.assert_allclose(visited._proba(D), best / best.sum(axis=1, keepdims=True))
+    together = np.stack([opened[:, ~outside].sum(axis=1), opened[:, outside].sum(axis=1)], axis=1)
+    np.testing.assert_allclose(visited._open_proba(D), together)
+    # the hiss heard once is still the outside
+    assert list(visited.predict(visited.featurize(scenes["high"][1:4]))) == ["outside"] * 3
+
+
+def test_windows_folded_in_are_a_new_visit(visited, trained) -> None:
+    _, scenes = trained
+    model = KMeansEncoderAcousticRecogniser.from_state(*visited.get_state())
+    model.fold_in(model.featurize(scenes["mid"][3:5]), ["outside"] * 2)
+    assert len(set(model.train_visits_.tolist())) == 4
+    assert sorted(model.mode_scenes_.tolist()) == ["inside", "outside", "outside", "outside"]
+
+
+def test_a_model_file_keeps_the_visits_and_one_from_before_has_one_a_place(
+    visited, trained, tmp_path
+) -> None:
+    from tests.test_modelfile import refused_in_one_line, rewrite_arrays
+
+    _, scenes = trained
+    X = visited.featurize(scenes["high"][1:4])
+    path = save_model(tmp_path / "m.npz", {"acoustic": visited})
+    loaded = load_model(path)["acoustic"]
+    np.testing.assert_allclose(loaded.predict_proba(X), visited.predict_proba(X))
+    assert loaded.mode_scenes_.tolist() == visited.mode_scenes_.tolist()
+    np.testing.assert_array_equal(loaded.train_visits_, visited.train_visits_)
+    # saved before visits: no visit arrays, a head row a place
+    model, _ = trained
+    old = save_model(tmp_path / "old.npz", {"acoustic": model})
+    rewrite_arrays(old, lambda a: [a.pop(f"acoustic/{k}") for k in ("train_visits", "mode_scenes")])
+    before = load_model(old)["acoustic"]
+    assert before.mode_scenes_.tolist() == before.scenes_
+    np.testing.assert_allclose(before.predict_proba(X), model.predict_proba(X))
+    # rows that name a place the model does not have: refused, in one line
+    rewrite_arrays(path, lambda a: a["acoustic/mode_scenes"].__setitem__(0, "elsewhere"))
+    refused_in_one_line(path, "head's rows do not match its places")
+
+
+def test_visits_are_recordings_and_teach_presses_close_in_time(tmp_path) -> None:
+    """A recording longer than a window is a visit of its own; one-window presses of a place
+    made within half an hour of each other are one visit, a press a day later another."""
+    import os
+
+    from servant_core.library import Recording, WindowFeatures, visits_of
+
+    made = {"long": 0, "press-1": 0, "press-2": 600, "press-3": 1500, "later": 86_400, "in": 0}
+    recordings = []
+    for name, offset in made.items():
+        path = tmp_path / f"{name}.wav"
+        path.write_bytes(b"")
+        os.utime(path, (1_700_000_000 + offset, 1_700_000_000 + offset))
+        recordings.append(Recording("inside" if name == "in" else "cafe", path))
+    recording = np.array([0, 0, 0, 1, 2, 3, 4, 5])  # `long` has three windows
+    wf = WindowFeatures(
+        np.zeros((8, 1)), np.array(["cafe"] * 7 + ["inside"]), recording, np.zeros(8), recordings
+    )
+    visits = visits_of(wf)
+    long, p1, p2, p3, later, inside = (visits[recording == i][0] for i in range(6))
+    assert p1 == p2 == p3
+    assert len({long, p1, later, inside}) == 4
+
+
+# A small fixed subset with three recordings a scene (the first three by name of each scene that
+# has three or more): a place heard through several recordings is several visits.
+VISITS_SUBSET = {
+    "beach": ["dusktide-cast-beach.mp3", "focusflow-beach.mp3", "loco-sound-v2-seaside.mp3"],
+    "cafe": ["audio-ambient-cafe.mp3", "audionova-restaurant.mp3", "csesoc-hackathon-c-cafe.mp3"],
+    "construction": [
+        "citysoundscape-fro-construction-sound.mp3",
+        "moodist-construction-site.mp3",
+        "relaxandsleep-construction-site.mp3",
+    ],
+    "crowd": [
+        "audio-ambient-baseball-stadium-background.mp3",
+        "dusktide-cast-crowd.mp3",
+        "loco-sound-v2-conversation.mp3",
+    ],
+    "library": ["codingweb-library.mp3", "focusflow-library.mp3", "moodist-library.mp3"],
+    "office": [
+        "csesoc-hackathon-c-office.mp3",
+        "datameditation-office.mp3",
+        "dusktide-cast-office.mp3",
+    ],
+    "station": [
+        "datameditation-station.mp3",
+        "moodist-subway-station.mp3",
+        "somnio-train-station.mp3",
+    ],
+    "street": [
+        "ambience-designer-street-sounds-2.mp3",
+        "audio-ambient-city.mp3",
+        "audionova-street-a17ffce.mp3",
+    ],
+    "supermarket": [
+        "datameditation-shopping.mp3",
+        "moodist-supermarket.mp3",
+        "richwise-uk-supermarket.ogg",
+    ],
+    "vehicle": ["calmit-train.mp3", "codingweb-train.mp3", "datameditation-inthecar.mp3"],
+}
+
+
+@pytest.mark.slow
+def test_one_window_of_each_of_three_recordings_a_place_on_the_real_recordings(
+    shared_data, tmp_path
+) -> None:
+    """Teach mode's k = 1 on 30 real recordings (three a scene): each recording is a visit of its
+    place. With a head row a place (visits ignored) this subset gives 0.758; the issue's k = 1
+    target is 0.85 (the whole library's figure is bench/few_shot.py's)."""
+    from servant_core.evaluate import evaluate_audio
+    from servant_core.library import SceneLibrary
+    from tests.conftest import link_library
+
+    subset = {scene: (names, 0) for scene, names in VISITS_SUBSET.items()}
+    library = SceneLibrary.scan(link_library(tmp_path / "lib", shared_data, subset))
+    result = evaluate_audio(library, "kmeans-encoder", "fewshot", shots=(1,))
+    assert result["rows"][0]["balanced_accuracy"] >= 0.85

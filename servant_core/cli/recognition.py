@@ -36,7 +36,13 @@ from servant_core.event_text import confidence_text, place
 from servant_core.features.rows import checked_rows, usable_rows
 from servant_core.fusion import FusionConfig, LearnedFusion
 from servant_core.fusion.elsewhere import place_probability
-from servant_core.library import SceneLibrary, featurize_recordings, read_picture, read_pictures
+from servant_core.library import (
+    SceneLibrary,
+    featurize_recordings,
+    read_picture,
+    read_pictures,
+    visits_of,
+)
 from servant_core.modelfile import check_model_output, load_model_and_fusion, save_model
 from servant_core.progress import Progress
 from servant_core.recognisers import (
@@ -47,7 +53,12 @@ from servant_core.recognisers import (
     make_recogniser,
 )
 from servant_core.recognisers.background import kept_out
-from servant_core.recognisers.base import knows_elsewhere, open_predict, open_probabilities
+from servant_core.recognisers.base import (
+    fit_visits,
+    knows_elsewhere,
+    open_predict,
+    open_probabilities,
+)
 from servant_core.senses import ROLE_SENSE, SAMPLE_SENSES
 from servant_core.storage import default_model_file
 
@@ -94,7 +105,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             on_error,
             Progress("listening to recordings"),
         )
-        audio.fit(wf.features, wf.scenes)
+        fit_visits(audio, wf.features, wf.scenes, visits_of(wf))
         recognisers["acoustic"] = audio
         summary["acoustic"] = {
             "method": args.audio_method,

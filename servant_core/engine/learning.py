@@ -37,10 +37,17 @@ from servant_core.fusion.learning import (
     train_fusion_net,
     window_opinions,
 )
-from servant_core.library import SampleFile, SceneLibrary, featurize_recordings, read_pictures
+from servant_core.library import (
+    SampleFile,
+    SceneLibrary,
+    featurize_recordings,
+    read_pictures,
+    visits_of,
+)
 from servant_core.modelfile import save_model
 from servant_core.recognisers import Recogniser, make_recogniser
 from servant_core.recognisers.background import kept_out
+from servant_core.recognisers.base import fit_visits
 from servant_core.senses import SAMPLE_SENSES, SENSES
 from servant_core.storage import atomic_write_bytes
 
@@ -207,7 +214,12 @@ def refit_audio(
         on_error=on_error,
         on_progress=on_progress,
     )
-    return kept_out(model, library.recordings).fit(windows.features, list(windows.scenes))
+    return fit_visits(
+        kept_out(model, library.recordings),
+        windows.features,
+        list(windows.scenes),
+        visits_of(windows),
+    )
 
 
 def refit_pictures(

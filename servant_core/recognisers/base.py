@@ -120,6 +120,14 @@ def check_training_scenes(scenes: Sequence[str] | np.ndarray, n_rows: int) -> li
     return distinct
 
 
+def fit_visits(model: Any, X: np.ndarray, scenes: Any, visits: np.ndarray | None) -> Any:
+    """`model.fit(X, scenes)`, telling a method that learns a place's visits apart (one whose
+    `fit` takes `visits`) which visit each row comes from (`library.visits_of`)."""
+    if visits is not None and "visits" in inspect.signature(model.fit).parameters:
+        return model.fit(X, scenes, visits=visits)
+    return model.fit(X, scenes)
+
+
 def cluster_spreads(X: np.ndarray, clusters: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """Root-mean-square distance of each cluster's members to their centre (its own spread).
 
