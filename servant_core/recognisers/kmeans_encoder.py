@@ -30,11 +30,13 @@
    `predict_proba` stays the share among the taught places (the elsewhere column left out).
 8. Visits: a place taught on several visits (two cafés both called `cafe`, the street by day
    and by night, each recording of a library) is several modes, not one blob. The head learns
-   each visit of a place as a class of its own, every visit weighing alike, and a place's
-   probability is that of its likeliest visit (the largest, not the sum: summed, a place taught
-   on many visits gathers a little from each and outvotes a place taught once; few-shot k = 1 on
-   the 84 dev recordings 0.69 with one class a place, 0.69 summed, 0.88 the largest). `fit`
-   takes the visit of each window (`visits`); without them a place is one visit, as before.
+   each visit of a place as a class of its own, every visit weighing alike. Which place
+   (`predict_proba`): the place of the likeliest visit (the largest, not the sum: summed, a
+   place taught on many visits gathers a little from each and outvotes a place taught once;
+   few-shot k = 1 on the 84 dev recordings 0.69 with one class a place, 0.69 summed, 0.88 the
+   largest). The probability of a place and not somewhere else (`open_proba`): all its visits
+   together. `fit` takes the visit of each window (`visits`; `library.visits_of`); without
+   them a place is one visit, and the model is the one of before.
 9. Calibration: the probabilities are softmax(logits / `temperature`). The head is fitted to be
    right on the training windows and is surer than it should be on windows it never saw (a
    place heard through another microphone most of all); a temperature above 1 softens every
@@ -290,9 +292,10 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         # One class a visit of a place (module docstring, 8), every visit weighing alike whatever
         # its number of windows, and the background (`<elsewhere>`) as much as one place's visits
         # on average. With one visit a place these are scikit-learn's balanced class weights.
-        mode_keys = np.char.add(np.char.add(self.train_scenes_, "\x1f"), self.train_visits_)
-        keys, modes = np.unique(mode_keys, return_inverse=True)
-        self.mode_scenes_ = np.array([k.split("\x1f", 1)[0] for k in keys.tolist()])
+        pairs = np.stack([self.train_scenes_, self.train_visits_], axis=1)
+        keys, modes = np.unique(pairs, axis=0, return_inverse=True)
+        modes = modes.reshape(-1)
+        self.mode_scenes_ = keys[:, 0].astype(str)
         n_modes = len(keys)
         places = len(set(self.mode_scenes_.tolist()))
         labels = np.concatenate([modes, np.full(len(self.background_descriptors_), n_modes)])
