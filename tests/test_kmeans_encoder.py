@@ -439,3 +439,24 @@ def test_one_window_of_each_of_three_recordings_a_place_on_the_real_recordings(
     library = SceneLibrary.scan(link_library(tmp_path / "lib", shared_data, subset))
     result = evaluate_audio(library, "kmeans-encoder", "fewshot", shots=(1,))
     assert result["rows"][0]["balanced_accuracy"] >= 0.85
+
+
+def test_the_apps_retrain_learns_a_long_recording_and_the_presses_as_two_visits(tmp_path) -> None:
+    """The library's retrain (teach mode's Retrain, the library screen's R) passes the visits:
+    a 15 s recording of the street and two presses there are two visits; the café's one press
+    is one."""
+    from servant_core.audio import write_wav
+    from servant_core.engine.learning import refit_audio
+    from servant_core.library import SceneLibrary
+    from tests.test_codebook import RATE
+
+    rng = np.random.default_rng(4)
+    street, cafe = noise_scene(rng, 4000, 5), noise_scene(rng, 300, 1)
+    write_wav(tmp_path / "street" / "walk.wav", np.concatenate(street[:3]), RATE)
+    for i in (3, 4):
+        write_wav(tmp_path / "street" / f"teach-{i}.wav", street[i], RATE)
+    write_wav(tmp_path / "cafe" / "teach-0.wav", cafe[0], RATE)
+    model = refit_audio(
+        SceneLibrary.scan(tmp_path), KMeansEncoderAcousticRecogniser(**SMALL), 5.0, print
+    )
+    assert sorted(model.mode_scenes_.tolist()) == ["cafe", "street", "street"]

@@ -18,8 +18,13 @@ import numpy as np
 
 from servant_core.errors import ServantError
 from servant_core.fusion.learned import FusionNet, SenseOpinions
-from servant_core.library import Picture, WindowFeatures
-from servant_core.recognisers.base import Recogniser, init_params, open_probabilities
+from servant_core.library import Picture, WindowFeatures, visits_of
+from servant_core.recognisers.base import (
+    Recogniser,
+    fit_visits,
+    init_params,
+    open_probabilities,
+)
 
 DEFAULT_FOLDS = 4
 
@@ -56,9 +61,11 @@ def held_out_opinions(
     X: np.ndarray,
     scenes: Sequence[str] | np.ndarray,
     fold: np.ndarray,
+    visits: np.ndarray | None = None,
 ) -> SenseOpinions:
-    """Each item's opinion from a model fitted on the other folds. A fold whose complement
-    cannot be fitted (fewer than two scenes) gives no opinions; its items are left out."""
+    """Each item's opinion from a model fitted on the other folds (told the `visits` of its
+    rows, where it learns them). A fold whose complement cannot be fitted (fewer than two
+    scenes) gives no opinions; its items are left out."""
     scenes = np.asarray(scenes)
     columns = sorted(set(scenes.tolist()))
     proba = np.zeros((len(scenes), len(columns)))
@@ -67,7 +74,8 @@ def held_out_opinions(
     for f in np.unique(fold):
         test = fold == f
         try:
-            model = make_model().fit(X[~test], scenes[~test])
+            kept = None if visits is None else visits[~test]
+            model = fit_visits(make_model(), X[~test], scenes[~test], kept)
         except ServantError:
             continue
         index = [columns.index(s) for s in model.scenes_]
@@ -89,6 +97,7 @@ def window_opinions(
         windows.features,
         windows.scenes,
         contiguous_folds(windows.recording, windows.position, folds),
+        visits_of(windows),
     )
 
 
