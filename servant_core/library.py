@@ -28,10 +28,10 @@ from servant_core.storage import open_regular_file, os_reason, walk_files
 # A webcam frame is under 1 Mpx and a phone photo under 50 Mpx; a header claiming more is
 # damaged or hostile (a 1 MB PNG can claim gigabytes). Checked before decoding.
 MAX_PICTURE_PIXELS = 50_000_000
+MAX_PICTURE_BYTES = 64 * 1024 * 1024
 # One-window recordings of a place (teach mode's presses, windows labelled live) made no more than
 # this apart are one visit (`visits_of`).
 VISIT_GAP_SECONDS = 30 * 60
-MAX_PICTURE_BYTES = 64 * 1024 * 1024
 
 ProgressCallback = Callable[[int, int], None]
 """`on_progress(done, total)`: called after each file of a long step (done counts from 1)."""
