@@ -40,7 +40,7 @@ from peers import PEERS, RATE, featurize_all, with_source_column  # noqa: E402
 
 from servant_core.cli import library_noise_silenced  # noqa: E402
 from servant_core.evaluate import source_of  # noqa: E402
-from servant_core.library import SceneLibrary, WindowFeatures  # noqa: E402
+from servant_core.library import SceneLibrary, WindowFeatures, visits_of  # noqa: E402
 from servant_core.recognisers import make_audio_recogniser  # noqa: E402
 from servant_core.recognisers.base import fit_visits  # noqa: E402
 
@@ -94,7 +94,7 @@ def curve(
             fit_rows = np.isin(wf.recording, train)
             test_rows = wf.recording == left_out
             model = fit_visits(
-                make(), wf.features[fit_rows], wf.scenes[fit_rows], wf.recording[fit_rows]
+                make(), wf.features[fit_rows], wf.scenes[fit_rows], visits_of(wf)[fit_rows]
             )
             said += [str(s) for s in model.predict(wf.features[test_rows])]
             truth += [str(s) for s in wf.scenes[test_rows]]

@@ -297,7 +297,8 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         modes = modes.reshape(-1)
         self.mode_scenes_ = keys[:, 0].astype(str)
         n_modes = len(keys)
-        places = len(set(self.mode_scenes_.tolist()))
+        self.classes_ = sorted(set(self.mode_scenes_.tolist()))
+        places = len(self.classes_)
         labels = np.concatenate([modes, np.full(len(self.background_descriptors_), n_modes)])
         counts = np.bincount(labels, minlength=n_modes + 1)
         share = np.ones(n_modes + 1)
@@ -313,7 +314,6 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         if len(head.classes_) == 2:  # scikit-learn keeps one weight vector for two classes
             coef = np.vstack([-coef / 2, coef / 2])
             intercept = np.array([-intercept[0] / 2, intercept[0] / 2])
-        self.classes_ = sorted(set(self.mode_scenes_.tolist()))
         self.coef_, self.intercept_ = coef[:n_modes], intercept[:n_modes]
         self.elsewhere_coef_ = coef[n_modes:].reshape(-1, coef.shape[1])
         self.elsewhere_intercept_ = intercept[n_modes:]
