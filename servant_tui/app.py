@@ -32,7 +32,7 @@ from servant_tui.heap import release_free_heap
 from servant_tui.messages import EngineEvent, SensorUpdate, SpectrumUpdate, TrainingDone
 from servant_tui.screens.dialogs import HelpScreen, LabelPrompt
 from servant_tui.screens.live import LiveScreen, device_message
-from servant_tui.widgets.scene import leaned_text
+from servant_tui.widgets.scene import answers_question, leaned_text
 from servant_tui.widgets.text import clock, error_text
 
 
@@ -298,16 +298,9 @@ class ServantApp(App[None]):
         place, or a place is decided: the wearer walked on (or the place was known after all).
         The question closes by itself, said in the log; no answer is taken for a skip."""
         prompt = self._prompt
-        if prompt is None or prompt.withdrawn or not getattr(event, "scene", None):
+        if prompt is None or prompt.withdrawn:
             return
-        asked = prompt.event.sense
-        named = (
-            isinstance(event, Decision)
-            or (isinstance(event, AcousticPrediction) and asked == "audio")
-            or (isinstance(event, VisualPrediction) and asked == "image")
-            or (isinstance(event, SensePrediction) and asked == event.sense)
-        )
-        if named:
+        if answers_question(event, prompt.event.sense):
             self.log_line(
                 event.t,
                 f"[magenta]question withdrawn: this is {escape(place(event.scene))} now[/]",

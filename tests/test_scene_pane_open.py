@@ -3,7 +3,7 @@ somewhere else (a sound that knows elsewhere), or the senses' average (the rule 
 
 from __future__ import annotations
 
-from servant_core.events import Decision
+from servant_core.events import AcousticPrediction, Decision, UnknownScene, VisualPrediction
 from servant_tui.widgets.scene import ScenePane
 
 
@@ -18,3 +18,26 @@ def test_a_decision_that_knows_elsewhere_says_so() -> None:
     assert "here, not elsewhere 81.0 %" in rows_text(sure)
     averaged = Decision(5.0, "cafe", 70.0, "CafeScene detected", 90.0, 50.0, "%")
     assert "average 70.0 %" in rows_text(averaged)
+
+
+def test_at_an_untaught_place_the_pane_says_so_and_the_last_decision_is_history() -> None:
+    """Walked on from the café to a building site: once "What is this place?" is asked, the
+    Scene pane no longer shows the café as what was decided, until the sound names a taught
+    place again."""
+    pane = ScenePane()
+    cafe = Decision(5.0, "cafe", 81.0, "CafeScene detected", 90.0, 50.0, "%", not_elsewhere=True)
+    pane.show_event(cafe)
+    decided = dict((key, str(text)) for key, _, text in pane._rows())["decided"]
+    assert decided == "CafeScene detected"
+
+    pane.show_event(UnknownScene(60.0, "audio", "cafe", "w1"))
+    rows = [(key, str(text)) for key, _, text in pane._rows()]
+    assert ("decided", "an unknown place") in rows
+    assert any(key == "history" and text.startswith("cafe") for key, text in rows)
+    # a picture naming a place does not answer a question about the sound
+    pane.show_event(VisualPrediction(62.0, "cafe", 60.0, confidence_unit="%"))
+    assert ("decided", "an unknown place") in [(k, str(t)) for k, _, t in pane._rows()]
+
+    pane.show_event(AcousticPrediction(65.0, "street", 70.0, confidence_unit="%"))
+    rows = [(key, str(text)) for key, _, text in pane._rows()]
+    assert ("decided", "CafeScene detected") in rows

@@ -9,12 +9,13 @@ from rich.table import Table
 from rich.text import Text
 from textual.widgets import Static
 
-from servant_core.event_text import confidence_text
+from servant_core.event_text import UNKNOWN_PLACE, confidence_text
 from servant_core.events import (
     AcousticPrediction,
     Decision,
     FusionState,
     SensePrediction,
+    UnknownScene,
     VisualPrediction,
 )
 from servant_core.senses import SAMPLE_SENSES
@@ -43,6 +44,20 @@ def leaned_text(decision: Decision) -> str | None:
     return f"leaned on {sense_words(leaned)}" if leaned else None
 
 
+def answers_question(event: object, sense: str) -> bool:
+    """Whether an event makes "What is this place?", asked for `sense`, stale: a place is
+    decided, or that sense now names a taught place (the wearer walked on, or the place was
+    known after all)."""
+    if not getattr(event, "scene", None):
+        return False
+    return (
+        isinstance(event, Decision)
+        or (isinstance(event, AcousticPrediction) and sense == "audio")
+        or (isinstance(event, VisualPrediction) and sense == "image")
+        or (isinstance(event, SensePrediction) and sense == event.sense)
+    )
+
+
 class ScenePane(Static):
     DEFAULT_CSS = """
     ScenePane { height: 1fr; }
@@ -65,6 +80,9 @@ class ScenePane(Static):
         }
         self.fusion: FusionState | None = None
         self.decisions: deque[Decision] = deque(maxlen=HISTORY)
+        # "What is this place?" asked since the last decision: the wearer is somewhere untaught,
+        # so the last decision is history, not where the wearer is
+        self.asked: UnknownScene | None = None
 
     def on_mount(self) -> None:
         self.update(self._render_state())
@@ -73,6 +91,8 @@ class ScenePane(Static):
         self.update(self._render_state())
 
     def show_event(self, event: object) -> None:
+        if self.asked is not None and answers_question(event, self.asked.sense):
+            self.asked = None
         if isinstance(event, AcousticPrediction):
             self.heard = event
         elif isinstance(event, VisualPrediction):
@@ -83,6 +103,8 @@ class ScenePane(Static):
             self.fusion = event
         elif isinstance(event, Decision):
             self.decisions.appendleft(event)
+        elif isinstance(event, UnknownScene):
+            self.asked = event
         else:
             return
         self.update(self._render_state())
@@ -113,7 +135,13 @@ class ScenePane(Static):
         pictures = self.fusion.pictures_taken if self.fusion else 0
         rows.append(("pictures", "pictures", str(pictures)))
         last = self.decisions[0] if self.decisions else None
-        if last is None:
+        history = list(self.decisions)[1:]
+        if self.asked is not None:
+            # an untaught place: its question, and the last decision goes to the history
+            rows.append(("decided", "decided", Text(UNKNOWN_PLACE, "magenta")))
+            rows.append(("average", "", Text("asked what it is", "magenta")))
+            history = list(self.decisions)
+        elif last is None:
             rows.append(("decided", "decided", Text("nothing yet", "grey50")))
         else:
             style = "bold green" if last.scene else "yellow"
@@ -126,7 +154,7 @@ class ScenePane(Static):
                 # "leaned on …" across the columns: the line is too narrow for it after a blank
                 on = sense_words(last.leaned_on)
                 rows.append(("leaned", "leaned", Text(f"on {on}", "green")))
-        for decision in list(self.decisions)[1:]:
+        for decision in history:
             rows.append(
                 (
                     "history",
