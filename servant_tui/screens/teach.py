@@ -218,7 +218,9 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
                     with Horizontal(classes="buttons"):
                         yield Button("Train", id="train-learner", variant="primary")
                         yield Button("Retrain recognisers", id="retrain")
-                    yield ProgressBar(show_eta=False, id="train-progress")
+                    # empty until Train is pressed: a bar of unknown length would animate
+                    # as if a job were running
+                    yield ProgressBar(total=1, show_eta=False, id="train-progress")
                     yield WorkProgress(id="retrain-progress")
                     yield Sparkline([], id="error-curve")
                     yield Static(id="train-status")
