@@ -47,14 +47,14 @@ class DeviceBar(Static):
         self.statuses: dict[str, DeviceStatus] = {}
 
     def on_mount(self) -> None:
-        self.update(self._render_statuses())
+        self.update(self._render_statuses(), layout=False)
 
     def on_resize(self) -> None:
-        self.update(self._render_statuses())
+        self.update(self._render_statuses(), layout=False)
 
     def show_status(self, status: DeviceStatus) -> None:
         self.statuses[status.device] = status
-        self.update(self._render_statuses())
+        self.update(self._render_statuses(), layout=False)
 
     def _render_statuses(self) -> str:
         """Each device gets what its message needs while the line has room, and a share of what

@@ -21,20 +21,20 @@ class ArmPane(Static):
         self.problem: str | None = None  # why there is no arm (the servo's status), if known
 
     def on_mount(self) -> None:
-        self.update(self._render_state())
+        self.update(self._render_state(), layout=False)
 
     def on_resize(self) -> None:
-        self.update(self._render_state())
+        self.update(self._render_state(), layout=False)
 
     def show_problem(self, message: str | None) -> None:
         """Say why no arm is attached (None: the servo works again)."""
         self.problem = message
-        self.update(self._render_state())
+        self.update(self._render_state(), layout=False)
 
     def show_state(self, state: ArmState) -> None:
         self.state = state
         self.set_class(state.armed, "-armed")
-        self.update(self._render_state())
+        self.update(self._render_state(), layout=False)
 
     def _render_state(self) -> Table:
         table = Table.grid(padding=(0, 1))

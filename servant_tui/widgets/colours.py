@@ -57,11 +57,11 @@ class ColoursPane(Static):
 
     def show_palette(self, palette: Palette) -> None:
         self.palette = palette
-        self.update(self._render_palette(palette))
+        self.update(self._render_palette(palette), layout=False)
 
     def on_resize(self) -> None:
         if self.palette is not None:
-            self.update(self._render_palette(self.palette))
+            self.update(self._render_palette(self.palette), layout=False)
 
     def _render_palette(self, palette: Palette) -> Group:
         table = Table.grid(padding=(0, 1))

@@ -85,10 +85,10 @@ class ScenePane(Static):
         self.asked: UnknownScene | None = None
 
     def on_mount(self) -> None:
-        self.update(self._render_state())
+        self.update(self._render_state(), layout=False)
 
     def on_resize(self) -> None:
-        self.update(self._render_state())
+        self.update(self._render_state(), layout=False)
 
     def show_event(self, event: object) -> None:
         if self.asked is not None and answers_question(event, self.asked.sense):
@@ -107,7 +107,7 @@ class ScenePane(Static):
             self.asked = event
         else:
             return
-        self.update(self._render_state())
+        self.update(self._render_state(), layout=False)
 
     def _render_state(self) -> Table:
         rows = self._rows()

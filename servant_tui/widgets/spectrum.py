@@ -1,7 +1,9 @@
 """The live spectrum pane: log-frequency bars with a dB scale, drawn with eighth blocks.
 
 Rendering is line by line (`render_line`) from strips computed once per frame, so a frame costs a
-few numpy operations and one string per row, whatever happens elsewhere on the screen.
+few numpy operations and one string per row, whatever happens elsewhere on the screen; only the
+rows that changed are repainted (the quiet rows above the bars mostly do not), since redrawing
+the pane thirty times a second is most of the application's CPU.
 """
 
 from __future__ import annotations
@@ -9,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from rich.segment import Segment
 from rich.style import Style
+from textual.geometry import Region
 from textual.strip import Strip
 from textual.widget import Widget
 
@@ -84,6 +87,7 @@ class Spectrum(Widget):
         self._last_t: float | None = None
         self._last_frame: SpectrumFrame | None = None
         self._strips: list[Strip] = []
+        self._rows_text: list[str] = []  # each strip's text, to repaint only the rows that changed
 
     @property
     def n_bands(self) -> int:
@@ -102,8 +106,18 @@ class Spectrum(Widget):
         self._levels = fall(self._levels, levels, dt, self.fall_db_per_s)
         self._last_t = frame.t
         self._last_frame = frame
+        before = self._rows_text
         self._strips = self._draw()
-        self.refresh()
+        self._rows_text = [strip.text for strip in self._strips]
+        changed = [
+            Region(0, y, self.size.width, 1)
+            for y, text in enumerate(self._rows_text)
+            if y >= len(before) or before[y] != text
+        ]
+        if len(before) != len(self._rows_text):
+            self.refresh()
+        elif changed:
+            self.refresh(*changed)
 
     def on_resize(self) -> None:
         if self._last_frame is not None:
@@ -112,6 +126,7 @@ class Spectrum(Widget):
             self._apply(self._last_frame)
         else:
             self._strips = self._draw()
+            self._rows_text = []
 
     def _draw(self) -> list[Strip]:
         width, height = self.size.width, self.size.height
@@ -122,21 +137,18 @@ class Spectrum(Widget):
         else:
             fraction = np.zeros(self.n_bands)
         eighths = np.round(fraction * rows * 8).astype(int)
+        from_bottom = np.arange(rows - 1, -1, -1)[:, None]
+        cells = np.clip(eighths[None, :] - from_bottom * 8, 0, 8)
+        # each row's characters as one string, all rows at once
+        bars = np.ascontiguousarray(BLOCKS[cells]).view(f"<U{self.n_bands}")[:, 0]
         axis_style = Style(color="grey50")
         strips = []
-        for y in range(rows):
-            from_bottom = rows - 1 - y
-            cells = np.clip(eighths - from_bottom * 8, 0, 8)
+        for y, text in enumerate(bars.tolist()):
             db = self.ceiling_db - span * y / rows
             label = f"{db:>4.0f}┤" if y % 3 == 0 else "    │"
-            strips.append(
-                Strip(
-                    [
-                        Segment(label, axis_style),
-                        Segment("".join(BLOCKS[cells]), self._row_style(y, rows)),
-                    ]
-                ).crop(0, width)
-            )
+            segments = [Segment(label, axis_style), Segment(text, self._row_style(y, rows))]
+            strip = Strip(segments, AXIS_WIDTH + self.n_bands)
+            strips.append(strip if AXIS_WIDTH + self.n_bands == width else strip.crop(0, width))
         strips.append(Strip([Segment(self._axis_line(), axis_style)]).crop(0, width))
         return strips
 
