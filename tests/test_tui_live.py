@@ -14,7 +14,7 @@ from servant_tui.app import ServantApp
 from servant_tui.screens.dialogs import HelpScreen, LabelPrompt
 from servant_tui.screens.live import fitted, shares
 from servant_tui.widgets.spectrum import Spectrum
-from tests.tui_replay import ReplayEngine, unknown_scene_script
+from tests.tui_replay import ReplayEngine, spectrum_frame, unknown_scene_script
 
 
 async def settle(pilot, predicate, tries: int = 100) -> None:
@@ -237,3 +237,28 @@ async def test_at_80x24_the_spectrum_has_room_for_its_bars_and_the_arm_for_every
         console = Console(width=app.live.arm.size.width, record=True)
         console.print(app.live.arm._render_state())
         assert "protocol" in console.export_text()
+
+
+async def test_the_spectrum_repaints_every_row_that_changed():
+    """The spectrum repaints only the rows whose bars changed (the CPU of the demo): after a loud
+    frame then a quiet one, every row on the screen is the quiet frame's, as if drawn whole."""
+    from textual.app import App, ComposeResult
+
+    class One(App[None]):
+        def compose(self) -> ComposeResult:
+            yield Spectrum()
+
+    app = One()
+    async with app.run_test(size=(60, 12)) as pilot:
+        spectrum = app.query_one(Spectrum)
+        loud = spectrum_frame(0.0, seed=1)
+        spectrum.show_frame(dataclasses.replace(loud, magnitude_db=loud.magnitude_db + 25.0))
+        await pilot.pause()
+        spectrum.show_frame(spectrum_frame(10.0, seed=2))  # 10 s later: the loud bars have fallen
+        await pilot.pause()
+        update = app.screen._compositor.render_full_update()
+        shown = ["".join(chop.text for chop in line) for line in update.strips]
+        drawn = [strip.text for strip in spectrum._strips]
+        assert shown == drawn
+        top = drawn[0][5:]
+        assert top.strip() == "" and drawn[-2][5:].strip() != ""  # the quiet frame's top is empty
