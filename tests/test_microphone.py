@@ -198,3 +198,35 @@ engine.start(); time.sleep(0.2); print("running", engine.running); engine.stop()
     assert len(problem) == 1 and "PortAudio library is missing" in problem[0]
     assert "libportaudio2" in problem[0]
     assert "running True" in lines
+
+
+HOT_PLUG = """
+import os
+real = os.environ["PULSE_SERVER"]
+os.environ["PULSE_SERVER"] = "unix:/nonexistent/pulse/native"  # no sound server: no device
+from servant_core.capture.microphone import Microphone
+from servant_core.errors import ServantError
+microphone = Microphone()
+try:
+    microphone.open()
+    print("opened without a device")
+except ServantError as error:
+    print("first:", error)
+os.environ["PULSE_SERVER"] = real  # the microphone is plugged in
+microphone.open()
+print("second: recording from", microphone.name)
+microphone.close()
+"""
+
+
+def test_a_microphone_plugged_in_after_start_is_found_when_opened_again(virtual_mic):
+    """PortAudio lists the devices there were when it started: a wearer who plugs the microphone
+    in after starting Servant (or whose USB microphone comes back under another number) got
+    "no input device found" at every reopen. Now an open that finds no device starts PortAudio
+    again and looks once more. A process of its own, so PortAudio starts with no device."""
+    done = subprocess.run(
+        [sys.executable, "-c", HOT_PLUG], capture_output=True, text=True, timeout=120, cwd=REPO
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "first: microphone: no input device found" in done.stdout
+    assert "second: recording from microphone" in done.stdout

@@ -33,6 +33,17 @@ def load_sounddevice() -> ModuleType:
     return sounddevice
 
 
+def rescan_devices(sd: ModuleType) -> bool:
+    """Start PortAudio again, so that its device list is the one there is now (it closes any
+    stream open); False if it could not."""
+    try:
+        sd._terminate()
+        sd._initialize()
+    except Exception:  # PortAudio's errors are generic; the caller's own error says what to do
+        return False
+    return True
+
+
 @dataclass(frozen=True)
 class InputDevice:
     index: int
@@ -111,7 +122,18 @@ class Microphone:
 
     def open(self) -> None:
         sd = load_sounddevice()
-        info = find_input_device(self.device)
+        try:
+            self._open(sd, find_input_device(self.device))
+        except ServantError:
+            # PortAudio knows the devices there were when it started: a microphone plugged in
+            # since, or back after a fault under another number, is found only once it starts
+            # again (the way sounddevice's maintainers give). Servant has no other stream open
+            # meanwhile (this one is closed), so nothing else stops.
+            if not rescan_devices(sd):
+                raise
+            self._open(sd, find_input_device(self.device))
+
+    def _open(self, sd: ModuleType, info: InputDevice) -> None:
         self.name = f"microphone {info.name!r}"
         rate = self.requested_rate or info.default_rate
         try:
