@@ -4,6 +4,7 @@ teach-mode recording, retraining from a library, unknown places, and the arm."""
 from __future__ import annotations
 
 import threading
+from typing import Any
 
 import cv2
 import numpy as np
@@ -32,7 +33,7 @@ from servant_core.events import (
 from servant_core.fusion import FusionConfig, ParallelFusion, SequentialFusion
 from servant_core.library import SceneLibrary, featurize_recordings
 from servant_core.modelfile import load_model, save_model
-from servant_core.recognisers import UNKNOWN
+from servant_core.recognisers import UNKNOWN, make_recogniser
 from servant_core.recognisers.codebook import CodebookAcousticRecogniser
 from servant_core.recognisers.paper import PaperVisualRecogniser
 from servant_core.servo.emulator import start_emulator
@@ -413,6 +414,54 @@ def test_an_unknown_place_heard_labelled_and_folded_in_is_then_recognised(shared
     assert again.scenes_ == engine.acoustic.scenes_
     np.testing.assert_allclose(again.predict_proba(X), engine.acoustic.predict_proba(X))
     assert list(again.predict(X)) == ["supermarket"] * 3
+
+
+def _label_an_untaught_site(shared_data, tmp_path, ask_after_s: float) -> tuple[Any, list, Any]:
+    """Servant's own recogniser taught two places as teach mode does (three 5 s windows each)
+    hears a building site it was not taught, asks, is told "site", and hears on: the file the
+    label wrote, the sound's later opinions and what was played."""
+    dev = shared_data / "audio" / "dev"
+    model = make_recogniser("audio", FRESH_METHODS["audio"])
+    taught = [("cafe", "cafe/moodist-cafe.mp3"), ("street", "street/moodist-busy-street.mp3")]
+    windows = [cut_windows(read_audio(dev / f, model.rate), model.rate)[:3] for _, f in taught]
+    model.fit(model.featurize(np.concatenate(windows)), [s for s, _ in taught for _ in range(3)])
+    rate = 44100
+    heard = read_audio(dev / "construction/relaxandsleep-construction-site.mp3", rate)
+    clock = ManualClock()
+    engine = Engine(
+        audio=PacedAudio([Clip(None, heard)], rate, realtime=False, clock=clock),
+        acoustic=model,
+        clock=clock,
+        spectrum_fps=0,
+        library_root=tmp_path / f"lib-{ask_after_s:g}",
+        ask_after_s=ask_after_s,
+    )
+    events = collect(engine)
+    engine.run_until(36.0)
+    asked = [e for e in events if isinstance(e, UnknownScene)]
+    assert asked, "the building site was not asked about"
+    path = engine.label_unknown(asked[-1].window_id, "site")
+    engine.run_until(1e9)
+    later = [e.scene for e in events if isinstance(e, AcousticPrediction) and e.t > 36.0]
+    return path, later, heard
+
+
+def test_a_label_is_for_the_whole_stretch_that_was_asked_about_so_the_place_is_then_known(
+    shared_data, tmp_path
+):
+    """ "What is this place?" comes after 30 s that named no taught place; the wearer's answer is
+    for those 30 s, not the last 5 s alone: one recording of all six windows joins the library,
+    and the model learns each. Measured on a real untaught recording: labelled from its last
+    window alone, none of the site's 5 later windows is named site; from the 30 s, 3 are."""
+    path, later, heard = _label_an_untaught_site(shared_data, tmp_path, ask_after_s=30.0)
+    saved, saved_rate = sf.read(str(path), dtype="float32")
+    # the six windows, oldest first, in one recording: asked again at 35 s, the 30 s before it
+    np.testing.assert_allclose(saved, heard[5 * saved_rate : 35 * saved_rate], atol=1e-4)
+    assert len(later) >= 4
+    named = np.mean([scene == "site" for scene in later])
+    assert named >= 0.5, later
+    _, one_window, _ = _label_an_untaught_site(shared_data, tmp_path, ask_after_s=5.0)
+    assert named > np.mean([scene == "site" for scene in one_window])
 
 
 def test_a_detected_scene_moves_the_arm_to_its_pose_only_when_armed(recognisers):

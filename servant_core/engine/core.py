@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import threading
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -119,7 +120,8 @@ class Engine:
       recogniser that knows elsewhere is held steady by `steady_open` instead (two windows in a
       row name a place).
     - `ask_after_s`: "What is this place?" (`UnknownScene` for the sound) once the sound has
-      named no taught place for this long.
+      named no taught place for this long; its label is for all those windows (one recording
+      of them in the library, each window learned).
 
     Public API used by front ends: `subscribe`, `start`, `stop`, `running`, `join`, `run_until`,
     `status`, `audio_rate`, `record_window`, `take_picture`, `latest_scores`, `retrain`,
@@ -217,7 +219,11 @@ class Engine:
         self._last_named: dict[str, tuple[float, str | None]] = {}
         self._scores.update({SENSES[sense].role: {} for sense in self.samples})
         self._unknowns = Unknowns()
-        self._unknown_since: float | None = None  # since when the sound names no taught place
+        # the sound's last windows (and their rates) while it names no taught place, up to
+        # `ask_after_s` of them: when "What is this place?" is asked and what its label is for
+        self._unknown_windows: deque[tuple[np.ndarray, int]] = deque(
+            maxlen=max(1, round(ask_after_s / self.window_seconds))
+        )
         self._open_roles: set[str] = set()  # roles whose probabilities know somewhere else
         # the last window's probabilities, where the sound knows somewhere else
         self._previous_window: dict[str, float] | None = None
@@ -439,8 +445,9 @@ class Engine:
             self._note_open("acoustic", acoustic)
         known = scene != UNKNOWN
         self._emit(AcousticPrediction(t, scene if known else None, confidence, scores, unit))
-        if self._unknown_held(known, t):
-            self._ask_label(Kept("audio", window, rate), scores, t)
+        if self._unknown_held(known, window, rate):
+            before = tuple(w for w, r in list(self._unknown_windows)[:-1] if r == rate)
+            self._ask_label(Kept("audio", window, rate, before), scores, t)
         with self._lock:
             events = self._judged("audio", scene if known else None, confidence, t, scores)
         self._handle(events)
@@ -461,7 +468,7 @@ class Engine:
         scores = {str(s): 0.0 for s in acoustic.scenes_}
         with self._lock:
             self._forget_windows()
-            self._unknown_since = None
+            self._unknown_windows.clear()
             self._scores["acoustic"] = scores
         self._emit(AcousticPrediction(t, None, 0.0, scores, acoustic.confidence_unit))
         with self._lock:
@@ -536,16 +543,17 @@ class Engine:
         else:
             self._open_roles.discard(role)
 
-    def _unknown_held(self, known: bool, t: float) -> bool:
-        """Whether the sound has named no taught place for `ask_after_s` (the window ending at t
-        included): only then is the wearer asked "What is this place?", and at each window while
-        it holds (the app limits how often the question is shown)."""
+    def _unknown_held(self, known: bool, window: np.ndarray, rate: int) -> bool:
+        """Whether the sound has named no taught place for `ask_after_s` (this window included):
+        only then is the wearer asked "What is this place?", and at each window while it holds
+        (the app limits how often the question is shown). The windows of that stretch are kept
+        (`_unknown_windows`): the label the wearer gives is for all of them, not the last 5 s
+        alone, so the place is learned from as much as teach mode's three presses give."""
         if known:
-            self._unknown_since = None
+            self._unknown_windows.clear()
             return False
-        if self._unknown_since is None:
-            self._unknown_since = t - self.window_seconds
-        return t - self._unknown_since >= self.ask_after_s - 1e-6
+        self._unknown_windows.append((window, rate))
+        return len(self._unknown_windows) == self._unknown_windows.maxlen
 
     def _smoothed(self, far: bool, scores: dict[str, float]) -> tuple[str, float, dict[str, float]]:
         """The window's judgement through the forward filter: (scene or UNKNOWN, confidence in

@@ -64,6 +64,14 @@ class Kept:
     sense: str  # "audio", "image", or a sample sense ("motion": readings (n, channels))
     data: np.ndarray
     rate: int = 0  # samples (or readings) a second; 0 for a picture
+    # the sound's windows just before `data` that named no taught place either, oldest first:
+    # the place the wearer is asked about, heard for longer than one window (shared, not copied)
+    before: tuple[np.ndarray, ...] = ()
+
+    @property
+    def windows(self) -> tuple[np.ndarray, ...]:
+        """Every window the label is for, oldest first."""
+        return (*self.before, self.data)
 
 
 class Unknowns:
@@ -246,7 +254,8 @@ def write_labelled(root: Path, scene: str, window_id: str, kept: Kept) -> Path:
     """Write a labelled unknown into the library (`root/<scene>/`, atomically); the file."""
     stamp = time.strftime("%Y%m%d-%H%M%S")
     if kept.sense == "audio":
-        return write_wav(root / scene / f"heard-{stamp}-{window_id}.wav", kept.data, kept.rate)
+        heard = np.concatenate(kept.windows)
+        return write_wav(root / scene / f"heard-{stamp}-{window_id}.wav", heard, kept.rate)
     if kept.sense in SAMPLE_SENSES:
         kind = SENSES[kept.sense]
         path = root / scene / f"felt-{stamp}-{window_id}{kind.suffixes[0]}"
@@ -260,8 +269,8 @@ def write_labelled(root: Path, scene: str, window_id: str, kept: Kept) -> Path:
 def folded_in(recogniser: Any, kept: Kept, scene: str) -> Any:
     """A copy of `recogniser` (one with `fold_in`) that also knows `kept` as `scene`."""
     if kept.sense == "audio":
-        samples = resample(kept.data, kept.rate, getattr(recogniser, "rate", kept.rate))
-        X = recogniser.featurize(samples[None, :])
+        rate = getattr(recogniser, "rate", kept.rate)
+        X = recogniser.featurize(np.stack([resample(w, kept.rate, rate) for w in kept.windows]))
     elif kept.sense in SAMPLE_SENSES:
         rows = resampled_rows(kept.data, kept.rate, int(getattr(recogniser, "rate", kept.rate)))
         X = recogniser.featurize([rows])
@@ -269,7 +278,7 @@ def folded_in(recogniser: Any, kept: Kept, scene: str) -> Any:
         X = recogniser.featurize([kept.data])
     checked_rows(X, f"{kept.sense} window")
     model = copy.deepcopy(recogniser)
-    model.fold_in(X, [scene])
+    model.fold_in(X, [scene] * len(X))
     return model
 
 
