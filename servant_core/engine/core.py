@@ -468,7 +468,6 @@ class Engine:
         scores = {str(s): 0.0 for s in acoustic.scenes_}
         with self._lock:
             self._forget_windows()
-            self._unknown_windows.clear()
             self._scores["acoustic"] = scores
         self._emit(AcousticPrediction(t, None, 0.0, scores, acoustic.confidence_unit))
         with self._lock:
@@ -530,11 +529,13 @@ class Engine:
         return any(other != sense and scene and when >= recent for other, (when, scene) in named)
 
     def _forget_windows(self) -> None:
-        """A new acoustic model: what the old one believed about past windows means nothing."""
+        """A new acoustic model: what the old one believed about past windows means nothing (and
+        a stretch just labelled is not asked about again)."""
         if self.smoother is not None:
             self.smoother.reset()
         self._previous_window = None
         self._previous_far = False
+        self._unknown_windows.clear()
 
     def _note_open(self, role: str, recogniser: Recogniser) -> None:
         """Remember whether a role's probabilities leave room for somewhere else (under _lock)."""
