@@ -111,6 +111,7 @@ class ServantApp(App[None]):
         self.live = LiveScreen(sample_senses=getattr(engine, "sample_senses", ()))
         self._prompt: LabelPrompt | None = None  # the open "What is this place?"
         self._quiet_until: float | None = None  # engine time before which no place is asked about
+        self._deferred = False  # an unknown place was met behind another screen, and logged
         self._noticed: set[str] = set()
         engine.subscribe(self._from_engine)
 
@@ -240,9 +241,6 @@ class ServantApp(App[None]):
                 return f"{event.sense}: {place(None)}"
             confidence = log_confidence(event)
             return f"{event.sense}: {escape(place(event.scene))} ({confidence})"
-        if isinstance(event, UnknownScene):
-            nearest = f", nearest {escape(event.nearest_scene)}" if event.nearest_scene else ""
-            return f"[magenta]unknown place ({event.sense}{nearest}): asking for a label[/]"
         if isinstance(event, DeviceStatus):
             style = "dim" if event.ok else "red"
             return f"[{style}]{event.device}: {escape(device_message(event))}[/]"
@@ -278,11 +276,22 @@ class ServantApp(App[None]):
     def _ask_label(self, event: UnknownScene) -> None:
         """Ask the wearer to name an unknown place, unless a question is open, another screen
         (teach mode, the library, settings) is in front, or one was asked or skipped lately."""
-        if self._prompt is not None or self.screen is not self.live:
+        # the log says so when it asks, or once when another screen keeps it from asking; not
+        # at every window the engine would ask at (the lines "hears an unknown place" say those)
+        nearest = f", nearest {escape(event.nearest_scene)}" if event.nearest_scene else ""
+        said = f"[magenta]unknown place ({event.sense}{nearest})"
+        if self._prompt is not None:
+            return
+        if self.screen is not self.live:
+            if not self._deferred:
+                self._deferred = True
+                self.log_line(event.t, f"{said}: asked on the live screen[/]")
             return
         if self._quiet_until is not None and event.t < self._quiet_until:
             return
+        self._deferred = False
         prompt = self._prompt = LabelPrompt(event, sorted(self.known_scenes))
+        self.log_line(event.t, f"{said}: asking for a label[/]")
 
         def answered(scene: str | None) -> None:
             self._prompt = None

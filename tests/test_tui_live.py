@@ -98,8 +98,11 @@ async def test_a_question_the_sound_has_answered_since_closes_by_itself(tmp_path
     async with app.run_test(size=(100, 30)) as pilot:
         await settle(pilot, lambda: isinstance(app.screen, LabelPrompt))
         engine.emit(AcousticPrediction(45.0, None, 0.0, {"cafe": 0.2}, "%"))  # still unknown
+        engine.emit(UnknownScene(45.0, "audio", "street", "window-8"))  # the engine asks again
         await pilot.pause()
         assert isinstance(app.screen, LabelPrompt)
+        # the log says it asked when it did, not at each window the engine would ask at
+        assert log_text(app).count("asking for a label") == 1
         if named_by == "sound":
             engine.emit(AcousticPrediction(50.0, "cafe", 81.0, {"cafe": 0.81}, "%"))
         else:

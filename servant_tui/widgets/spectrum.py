@@ -20,6 +20,13 @@ from servant_core.events import SpectrumFrame
 BLOCKS = np.array(list(" ▁▂▃▄▅▆▇█"))
 AXIS_WIDTH = 5  # "-60 " and a tick: the dB labels on the left
 FREQUENCY_TICKS = (50, 100, 200, 500, 1000, 2000, 5000, 10000, 20000)
+# One style object each, not one a row a frame: Textual caches what it renders by style
+AXIS_STYLE = Style(color="grey50")
+LOUD_STYLE, WARM_STYLE, BAR_STYLE = (
+    Style(color="#ff5f5f"),
+    Style(color="#ffd75f"),
+    Style(color="#5fd787"),
+)
 
 
 def log_band_edges(f_min: float, f_max: float, n_bands: int) -> np.ndarray:
@@ -141,15 +148,14 @@ class Spectrum(Widget):
         cells = np.clip(eighths[None, :] - from_bottom * 8, 0, 8)
         # each row's characters as one string, all rows at once
         bars = np.ascontiguousarray(BLOCKS[cells]).view(f"<U{self.n_bands}")[:, 0]
-        axis_style = Style(color="grey50")
         strips = []
         for y, text in enumerate(bars.tolist()):
             db = self.ceiling_db - span * y / rows
             label = f"{db:>4.0f}┤" if y % 3 == 0 else "    │"
-            segments = [Segment(label, axis_style), Segment(text, self._row_style(y, rows))]
+            segments = [Segment(label, AXIS_STYLE), Segment(text, self._row_style(y, rows))]
             strip = Strip(segments, AXIS_WIDTH + self.n_bands)
             strips.append(strip if AXIS_WIDTH + self.n_bands == width else strip.crop(0, width))
-        strips.append(Strip([Segment(self._axis_line(), axis_style)]).crop(0, width))
+        strips.append(Strip([Segment(self._axis_line(), AXIS_STYLE)]).crop(0, width))
         return strips
 
     @staticmethod
@@ -157,10 +163,10 @@ class Spectrum(Widget):
         """Green at the bottom, yellow then red near full scale."""
         height = 1.0 - y / max(rows - 1, 1)
         if height > 0.85:
-            return Style(color="#ff5f5f")
+            return LOUD_STYLE
         if height > 0.6:
-            return Style(color="#ffd75f")
-        return Style(color="#5fd787")
+            return WARM_STYLE
+        return BAR_STYLE
 
     def _axis_line(self) -> str:
         line = [" "] * (AXIS_WIDTH + self.n_bands)
