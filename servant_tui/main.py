@@ -18,6 +18,7 @@ if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
 
 INTERRUPTED = 130  # the shell's status for a command ended by SIGINT
+INTERRUPT_AGAIN_S = 0.05  # Ctrl-C that Python ignored is raised again this much later
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -43,9 +44,33 @@ def run_tui(engine_factory: Callable[[], Any], mode: str) -> int:
     return app.return_code or 0
 
 
+def interrupts_not_ignored(hook: Callable[[Any], None]) -> Callable[[Any], None]:
+    """An unraisable-exception hook that passes Ctrl-C on instead of printing it.
+
+    Ctrl-C that lands in code Python may not raise from (a weak reference's callback, such as the
+    one importlib runs when it drops a module's lock while a library loads) is printed as
+    "Exception ignored in: … KeyboardInterrupt" with a traceback, and the command goes on. Here it
+    is raised again in the main thread a moment later, once out of there, where `main` ends
+    quietly (130): from a timer's thread, as raised here it would be unraisable again (and if it
+    lands in such a place again, it comes round again)."""
+    import _thread
+    import threading
+
+    def unraisable(info: Any) -> None:
+        if isinstance(info.exc_value, KeyboardInterrupt):
+            timer = threading.Timer(INTERRUPT_AGAIN_S, _thread.interrupt_main)
+            timer.daemon = True
+            timer.start()
+        else:
+            hook(info)
+
+    return unraisable
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     from servant_core.threads import one_thread_pools
 
+    sys.unraisablehook = interrupts_not_ignored(sys.unraisablehook)
     one_thread_pools()  # before numpy loads
     try:
         return _main(argv)

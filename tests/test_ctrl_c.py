@@ -121,3 +121,39 @@ def test_teach_with_stdin_closed_is_one_line(tmp_path) -> None:
     assert done.stderr.decode().splitlines() == [
         "servant: error: teach reads the session from stdin, which is closed; run it in a terminal"
     ]
+
+
+def test_ctrl_c_that_python_would_ignore_during_an_import_still_ends_the_command() -> None:
+    """Ctrl-C at 1.5 s once landed in importlib's callback that drops a module's lock: Python
+    printed "Exception ignored in: … KeyboardInterrupt" with a traceback, and the command went
+    on. `main`'s hook raises it again in the main thread instead, and prints nothing. Here a weak
+    reference's callback raises it, as importlib's did."""
+    import weakref
+
+    from servant_tui.main import interrupts_not_ignored
+
+    printed: list[object] = []
+    before = sys.unraisablehook
+    sys.unraisablehook = interrupts_not_ignored(printed.append)
+
+    class Held:
+        pass
+
+    def dropped(_: object) -> None:
+        raise KeyboardInterrupt
+
+    try:
+        held = Held()
+        ref = weakref.ref(held, dropped)
+        with pytest.raises(KeyboardInterrupt):
+            del held  # the callback's KeyboardInterrupt cannot be raised here: it is unraisable
+            for _ in range(100):
+                time.sleep(0.01)  # raised here, at the main thread's next step
+        assert ref() is None
+    finally:
+        sys.unraisablehook = before
+    assert printed == []  # nothing printed; another unraisable error would still be
+    hook = interrupts_not_ignored(printed.append)
+    other = type("Info", (), {"exc_value": ValueError("x")})()
+    hook(other)
+    assert printed == [other]
