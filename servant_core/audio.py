@@ -41,7 +41,12 @@ SILENT_DBFS = -90.0
 def to_mono(samples: np.ndarray) -> np.ndarray:
     """Average the channels of a (frames, channels) array; a 1-D array is already mono."""
     samples = np.asarray(samples, dtype=np.float32)
-    return samples if samples.ndim == 1 else samples.mean(axis=1, dtype=np.float32)
+    if samples.ndim == 1:
+        return samples
+    # a damaged block (infinities: a broken MP3 frame, a read that failed part way) averages to
+    # NaN quietly; the decoder marks such samples damaged right after
+    with np.errstate(invalid="ignore", over="ignore"):
+        return samples.mean(axis=1, dtype=np.float32)
 
 
 def resample(signal: np.ndarray, rate_in: int, rate_out: int) -> np.ndarray:

@@ -119,6 +119,7 @@ class FailingDisk(io.RawIOBase):
 
 
 @pytest.mark.parametrize("good", [0, 100, 40_000])
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # the failed read's garbage averaged loudly
 def test_a_recording_whose_disk_fails_is_one_line_and_quiet(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str], good: int
 ) -> None:
