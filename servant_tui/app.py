@@ -200,6 +200,8 @@ class ServantApp(App[None]):
                 self.log_line(event.t, escape(arm_text(event)))
         elif isinstance(event, (AcousticPrediction, VisualPrediction)) and event.scene:
             self.seen_scenes.add(event.scene)
+            if isinstance(event, AcousticPrediction):
+                self._deferred = False  # the next unknown place met behind a screen is logged
         line = self._log_text(event)
         if line:
             self.log_line(event.t, line)
@@ -276,12 +278,12 @@ class ServantApp(App[None]):
     def _ask_label(self, event: UnknownScene) -> None:
         """Ask the wearer to name an unknown place, unless a question is open, another screen
         (teach mode, the library, settings) is in front, or one was asked or skipped lately."""
+        if self._prompt is not None:
+            return
         # the log says so when it asks, or once when another screen keeps it from asking; not
         # at every window the engine would ask at (the lines "hears an unknown place" say those)
         nearest = f", nearest {escape(event.nearest_scene)}" if event.nearest_scene else ""
         said = f"[magenta]unknown place ({event.sense}{nearest})"
-        if self._prompt is not None:
-            return
         if self.screen is not self.live:
             if not self._deferred:
                 self._deferred = True

@@ -10,7 +10,7 @@ import time
 from servant_core.actions.learner import ActionLearner
 from servant_core.actions.records import TeachRecord, label_scores
 from servant_core.engine import NO_MODEL, Engine, LiveSettings, build_live_engine
-from servant_core.events import UnknownScene
+from servant_core.events import AcousticPrediction, UnknownScene
 from servant_core.fusion import FusionConfig
 from servant_core.servo.emulator import start_emulator
 from servant_core.settings import Settings
@@ -91,6 +91,10 @@ async def test_an_unknown_place_waits_for_the_live_screen_and_does_not_nag(tmp_p
         assert not isinstance(app.screen, LabelPrompt), "asked over teach mode"
         # said once, not at every window the engine would ask at
         assert log_text(app).count("unknown place (audio): asked on the live screen") == 1
+        engine.emit(AcousticPrediction(16.0, "cafe", 80.0, {"cafe": 0.8}, "%"))  # walked on
+        engine.emit(UnknownScene(18.0, "audio", None, "audio-1c"))  # another unknown place
+        await pilot.pause(0.1)
+        assert log_text(app).count("unknown place (audio): asked on the live screen") == 2
         await pilot.press("escape")
         await pilot.pause()
         engine.emit(UnknownScene(20.0, "audio", None, "audio-2"))

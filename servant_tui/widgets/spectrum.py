@@ -20,7 +20,7 @@ from servant_core.events import SpectrumFrame
 BLOCKS = np.array(list(" ▁▂▃▄▅▆▇█"))
 AXIS_WIDTH = 5  # "-60 " and a tick: the dB labels on the left
 FREQUENCY_TICKS = (50, 100, 200, 500, 1000, 2000, 5000, 10000, 20000)
-# One style object each, not one a row a frame: Textual caches what it renders by style
+# The axis's and the bars' styles, made once rather than for each row of each frame
 AXIS_STYLE = Style(color="grey50")
 LOUD_STYLE, WARM_STYLE, BAR_STYLE = (
     Style(color="#ff5f5f"),
