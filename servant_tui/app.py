@@ -32,7 +32,7 @@ from servant_tui.heap import release_free_heap
 from servant_tui.messages import EngineEvent, SensorUpdate, SpectrumUpdate, TrainingDone
 from servant_tui.screens.dialogs import HelpScreen, LabelPrompt
 from servant_tui.screens.live import LiveScreen, device_message
-from servant_tui.widgets.scene import answers_question, leaned_text
+from servant_tui.widgets.scene import heard_by, leaned_text
 from servant_tui.widgets.text import clock, error_text
 
 
@@ -55,6 +55,11 @@ def default_library_root() -> Path:
 # wearer skips keeps quiet for longer. A place heard while teaching or editing is only logged.
 PROMPT_EVERY_S = 60.0
 PROMPT_AFTER_SKIP_S = 300.0
+# An open question closes by itself once the sense asked about has named taught places this long
+# (three 5 s windows in a row): the wearer walked into a place Servant knows. Not at one window
+# that happens to name one: at a building site heard as a café every fourth window, the question
+# vanished 5 s after it was asked, each time, before the wearer could answer it.
+WITHDRAW_AFTER_S = 10.0
 
 # How often the C heaps' free pages go back to the system. Under an open dialog Textual redraws
 # the whole screen beneath it for every engine event; each redraw's short-lived strips and
@@ -112,6 +117,7 @@ class ServantApp(App[None]):
         self._prompt: LabelPrompt | None = None  # the open "What is this place?"
         self._quiet_until: float | None = None  # engine time before which no place is asked about
         self._deferred = False  # an unknown place was met behind another screen, and logged
+        self._named_since: float | None = None  # since when the sense asked about names a place
         self._noticed: set[str] = set()
         engine.subscribe(self._from_engine)
 
@@ -292,6 +298,7 @@ class ServantApp(App[None]):
         if self._quiet_until is not None and event.t < self._quiet_until:
             return
         self._deferred = False
+        self._named_since = None
         prompt = self._prompt = LabelPrompt(event, sorted(self.known_scenes))
         self.log_line(event.t, f"{said}: asking for a label[/]")
 
@@ -305,18 +312,25 @@ class ServantApp(App[None]):
         self.push_screen(prompt, answered)
 
     def _withdraw_question(self, event: Any) -> None:
-        """An open "What is this place?" is stale once the sense it asked for names a taught
-        place, or a place is decided: the wearer walked on (or the place was known after all).
-        The question closes by itself, said in the log; no answer is taken for a skip."""
+        """An open "What is this place?" is stale once the sense it asked for has named taught
+        places for `WITHDRAW_AFTER_S`: the wearer walked on (or the place was known after all).
+        The question closes by itself, said in the log; no answer is taken for a skip. It stays
+        while the wearer has begun typing an answer, and a place decided on one window does not
+        close it: the label is for the stretch asked about, which is still unknown."""
         prompt = self._prompt
-        if prompt is None or prompt.withdrawn:
+        if prompt is None or prompt.withdrawn or not heard_by(event, prompt.event.sense):
             return
-        if answers_question(event, prompt.event.sense):
-            self.log_line(
-                event.t,
-                f"[magenta]question withdrawn: this is {escape(place(event.scene))} now[/]",
-            )
-            prompt.withdraw()
+        if not event.scene:
+            self._named_since = None
+            return
+        if self._named_since is None:
+            self._named_since = event.t
+        if event.t - self._named_since < WITHDRAW_AFTER_S or prompt.answering:
+            return
+        self.log_line(
+            event.t, f"[magenta]question withdrawn: this is {escape(place(event.scene))} now[/]"
+        )
+        prompt.withdraw()
 
     @work(thread=True, group="label", exit_on_error=False)
     def label_unknown(self, window_id: str, scene: str) -> None:

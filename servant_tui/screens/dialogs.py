@@ -72,6 +72,11 @@ class LabelPrompt(ModalScreen[str | None]):
         self.withdrawn = True
         self.dismiss(None)
 
+    @property
+    def answering(self) -> bool:
+        """Whether the wearer has begun typing a name (the question then stays open)."""
+        return bool(self.query_one("#scene", Input).value.strip())
+
     def compose(self) -> ComposeResult:
         sense = {"audio": "heard", "image": "saw"}.get(
             self.event.sense, f"felt ({self.event.sense})"

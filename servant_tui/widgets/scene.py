@@ -44,18 +44,22 @@ def leaned_text(decision: Decision) -> str | None:
     return f"leaned on {sense_words(leaned)}" if leaned else None
 
 
-def answers_question(event: object, sense: str) -> bool:
-    """Whether an event makes "What is this place?", asked for `sense`, stale: a place is
-    decided, or that sense now names a taught place (the wearer walked on, or the place was
-    known after all)."""
-    if not getattr(event, "scene", None):
-        return False
+def heard_by(event: object, sense: str) -> bool:
+    """Whether an event is what `sense` makes of its latest window or picture (a taught place or
+    none)."""
     return (
-        isinstance(event, Decision)
-        or (isinstance(event, AcousticPrediction) and sense == "audio")
+        (isinstance(event, AcousticPrediction) and sense == "audio")
         or (isinstance(event, VisualPrediction) and sense == "image")
         or (isinstance(event, SensePrediction) and sense == event.sense)
     )
+
+
+def answers_question(event: object, sense: str) -> bool:
+    """Whether an event says the place is known now, where "What is this place?" was asked for
+    `sense`: a place is decided, or that sense names a taught place."""
+    if not getattr(event, "scene", None):
+        return False
+    return isinstance(event, Decision) or heard_by(event, sense)
 
 
 class ScenePane(Static):
