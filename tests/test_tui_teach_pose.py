@@ -43,7 +43,9 @@ def values(screen) -> dict[str, str]:
 
 
 async def test_the_pose_step_reads_lists_and_removes_samples(tmp_path, arm):
-    earlier = TeachRecord("street", label_scores("street"), {"shoulder": 10.0}, time.time())
+    # as the file keeps a pose: its joints sorted by name
+    pose = {"elbow": 30.0, "gripper": 5.0, "shoulder": 10.0}
+    earlier = TeachRecord("street", label_scores("street"), pose, time.time())
     append_record(earlier)
     app = ServantApp(arm, library_root=tmp_path / "library")
     async with app.run_test(size=(120, 40)) as pilot:
@@ -53,6 +55,8 @@ async def test_the_pose_step_reads_lists_and_removes_samples(tmp_path, arm):
         screen = app.screen
         samples = screen.query_one("#samples", DataTable)
         assert samples.row_count == 1, "an earlier session's sample is listed"
+        # in the arm's order, as this session's samples are shown (seen in a tmux walk)
+        assert samples.get_row_at(0)[1] == "shoulder 10°, elbow 30°, gripper 5°"
 
         await type_into(pilot, "#new-scene", "cafe")
         await pilot.press("enter")

@@ -501,10 +501,14 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
         self.app.log_line(None, f"taught {scene}: {pose_text(pose)}")
 
     def _show_sample(self, record: Any) -> None:
+        """A sample's row, its joints in the arm's order (the file keeps them sorted by name:
+        an earlier session's samples read "elbow, gripper, shoulder" beside this one's)."""
         key = str(len(self._samples))
         self._samples[key] = record
+        order = {joint: i for i, joint in enumerate(self.joints())}
+        pose = dict(sorted(record.pose.items(), key=lambda item: order.get(item[0], len(order))))
         self.query_one("#samples", DataTable).add_row(
-            record.scene, pose_text(record.pose), record.source, key=key
+            record.scene, pose_text(pose), record.source, key=key
         )
 
     def _list_samples(self) -> None:
