@@ -74,8 +74,10 @@ class LabelPrompt(ModalScreen[str | None]):
 
     @property
     def answering(self) -> bool:
-        """Whether the wearer has begun typing a name (the question then stays open)."""
-        return bool(self.query_one("#scene", Input).value.strip())
+        """Whether the wearer has begun typing a name (the question then stays open); False
+        before the dialog is drawn."""
+        fields = self.query("#scene").results(Input)
+        return any(field.value.strip() for field in fields)
 
     def compose(self) -> ComposeResult:
         sense = {"audio": "heard", "image": "saw"}.get(
