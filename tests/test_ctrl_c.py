@@ -44,6 +44,35 @@ def test_ctrl_c_early_prints_no_traceback(after: float, tmp_path) -> None:
     assert child.returncode in (130, 2, -signal.SIGINT), child.returncode
 
 
+# The child is slowed in the first import `main` makes, and says 'R' there
+SLOW_FIRST_IMPORT = (
+    "import os, sys, time\n"
+    "class Slow:\n"
+    "    def find_spec(self, name, path=None, target=None):\n"
+    "        if name == 'servant_core.threads':\n"
+    "            os.write(1, b'R'); time.sleep(5)\n"
+    "        return None\n"
+    "sys.meta_path.insert(0, Slow())\n"
+    "from servant_tui.main import main; sys.exit(main())\n"
+)
+
+
+def test_ctrl_c_in_the_first_import_of_main_is_quiet(tmp_path) -> None:
+    """A fresh clone's CI run: Ctrl-C 0.05 s after start landed in `main`'s first import (on a
+    busy machine, with no bytecode cached yet), before its guard, and printed a traceback."""
+    child = subprocess.Popen(
+        [sys.executable, "-c", SLOW_FIRST_IMPORT, "eval", "image", str(tmp_path)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        cwd=REPO,
+    )
+    assert child.stdout is not None and child.stdout.read(1) == b"R"
+    child.send_signal(signal.SIGINT)
+    _, err = child.communicate(timeout=60)
+    assert err == b"", err.decode()
+    assert child.returncode == 130
+
+
 @pytest.mark.parametrize(
     "argv",
     [
