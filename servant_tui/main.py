@@ -68,8 +68,8 @@ def interrupts_not_ignored(hook: Callable[[Any], None]) -> Callable[[Any], None]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    # Everything under the guard, the first import too: in a fresh clone (no bytecode cached yet)
-    # Ctrl-C 0.05 s after start landed in `servant_core.threads`'s imports, outside it, and
+    # Everything under the guard, the first import too: on a busy machine Ctrl-C 0.05 s after
+    # start landed in `servant_core.threads`'s imports (logging, threading), outside it, and
     # printed a traceback
     try:
         sys.unraisablehook = interrupts_not_ignored(sys.unraisablehook)
