@@ -59,7 +59,7 @@ SLOW_FIRST_IMPORT = (
 
 def test_ctrl_c_in_the_first_import_of_main_is_quiet(tmp_path) -> None:
     """A fresh clone's CI run: Ctrl-C 0.05 s after start landed in `main`'s first import (on a
-    busy machine, with no bytecode cached yet), before its guard, and printed a traceback."""
+    busy machine), before its guard, and printed a traceback."""
     child = subprocess.Popen(
         [sys.executable, "-c", SLOW_FIRST_IMPORT, "eval", "image", str(tmp_path)],
         stdout=subprocess.PIPE,
