@@ -24,10 +24,11 @@ CONSOLE_SCRIPT = (
 SERVANT = "import sys; from servant_tui.main import main; sys.exit(main())"  # no 'R' first
 
 
-@pytest.mark.parametrize("after", [0.05, 0.2, 0.4, 0.8, 1.5])
-def test_ctrl_c_early_prints_no_traceback(after: float, tmp_path) -> None:
+def interrupted(script: str, tmp_path, after: float = 0.0) -> tuple[bytes, int]:
+    """(stderr, status) of `servant eval image TMP` run by `script`, given Ctrl-C `after`
+    seconds past the 'R' the script writes."""
     child = subprocess.Popen(
-        [sys.executable, "-c", CONSOLE_SCRIPT, "eval", "image", str(tmp_path)],
+        [sys.executable, "-c", script, "eval", "image", str(tmp_path)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         cwd=REPO,
@@ -36,12 +37,18 @@ def test_ctrl_c_early_prints_no_traceback(after: float, tmp_path) -> None:
     time.sleep(after)
     child.send_signal(signal.SIGINT)
     _, err = child.communicate(timeout=60)
+    return err, child.returncode
+
+
+@pytest.mark.parametrize("after", [0.05, 0.2, 0.4, 0.8, 1.5])
+def test_ctrl_c_early_prints_no_traceback(after: float, tmp_path) -> None:
+    err, code = interrupted(CONSOLE_SCRIPT, tmp_path, after)
     assert b"Traceback" not in err and b"KeyboardInterrupt" not in err, err.decode()
     assert len(err.splitlines()) <= 1, err.decode()  # the error if it had finished first
     # 130: Ctrl-C handled; 2: the command's own error came first; -SIGINT: the signal came as
     # Python was exiting (finalisation restores the default handler), which ends it silently
     # just the same, as a shell's status 130 (seen once in a loaded full run at 1.5 s)
-    assert child.returncode in (130, 2, -signal.SIGINT), child.returncode
+    assert code in (130, 2, -signal.SIGINT), code
 
 
 # The child is slowed in the first import `main` makes, and says 'R' there
@@ -60,17 +67,9 @@ SLOW_FIRST_IMPORT = (
 def test_ctrl_c_in_the_first_import_of_main_is_quiet(tmp_path) -> None:
     """A fresh clone's CI run: Ctrl-C 0.05 s after start landed in `main`'s first import (on a
     busy machine), before its guard, and printed a traceback."""
-    child = subprocess.Popen(
-        [sys.executable, "-c", SLOW_FIRST_IMPORT, "eval", "image", str(tmp_path)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        cwd=REPO,
-    )
-    assert child.stdout is not None and child.stdout.read(1) == b"R"
-    child.send_signal(signal.SIGINT)
-    _, err = child.communicate(timeout=60)
+    err, code = interrupted(SLOW_FIRST_IMPORT, tmp_path)
     assert err == b"", err.decode()
-    assert child.returncode == 130
+    assert code == 130
 
 
 @pytest.mark.parametrize(
