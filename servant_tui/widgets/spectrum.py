@@ -8,6 +8,8 @@ the pane thirty times a second is most of the application's CPU.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from rich.segment import Segment
 from rich.style import Style
@@ -60,6 +62,26 @@ def fall(previous: np.ndarray, new: np.ndarray, dt: float, fall_db_per_s: float)
 
 def frequency_label(hz: float) -> str:
     return f"{hz / 1000:g}k" if hz >= 1000 else f"{hz:g}"
+
+
+@lru_cache(maxsize=8)
+def axis_line(n_bands: int, f_min: float, f_max: float) -> str:
+    """The frequency axis under `n_bands` log-spaced bars: "Hz" and the ticks that fit. Made once
+    a width, not at each of the ~25 frames a second."""
+    line = [" "] * (AXIS_WIDTH + n_bands)
+    line[: AXIS_WIDTH - 1] = list(" Hz ")
+    scale = n_bands / np.log(f_max / f_min)
+    next_free = AXIS_WIDTH
+    for hz in FREQUENCY_TICKS:
+        if not f_min <= hz <= f_max:
+            continue
+        column = AXIS_WIDTH + int(np.log(hz / f_min) * scale)
+        text = frequency_label(hz)
+        if column < next_free or column + len(text) > len(line):
+            continue
+        line[column : column + len(text)] = list(text)
+        next_free = column + len(text) + 1
+    return "".join(line)
 
 
 class Spectrum(Widget):
@@ -155,7 +177,8 @@ class Spectrum(Widget):
             segments = [Segment(label, AXIS_STYLE), Segment(text, self._row_style(y, rows))]
             strip = Strip(segments, AXIS_WIDTH + self.n_bands)
             strips.append(strip if AXIS_WIDTH + self.n_bands == width else strip.crop(0, width))
-        strips.append(Strip([Segment(self._axis_line(), AXIS_STYLE)]).crop(0, width))
+        axis = axis_line(self.n_bands, self.f_min, self.f_max)
+        strips.append(Strip([Segment(axis, AXIS_STYLE)]).crop(0, width))
         return strips
 
     @staticmethod
@@ -167,22 +190,6 @@ class Spectrum(Widget):
         if height > 0.6:
             return WARM_STYLE
         return BAR_STYLE
-
-    def _axis_line(self) -> str:
-        line = [" "] * (AXIS_WIDTH + self.n_bands)
-        line[: AXIS_WIDTH - 1] = list(" Hz ")
-        scale = self.n_bands / np.log(self.f_max / self.f_min)
-        next_free = AXIS_WIDTH
-        for hz in FREQUENCY_TICKS:
-            if not self.f_min <= hz <= self.f_max:
-                continue
-            column = AXIS_WIDTH + int(np.log(hz / self.f_min) * scale)
-            text = frequency_label(hz)
-            if column < next_free or column + len(text) > len(line):
-                continue
-            line[column : column + len(text)] = list(text)
-            next_free = column + len(text) + 1
-        return "".join(line)
 
     def render_line(self, y: int) -> Strip:
         if y < len(self._strips):
