@@ -283,8 +283,14 @@ class ServantApp(App[None]):
 
     def _ask_label(self, event: UnknownScene) -> None:
         """Ask the wearer to name an unknown place, unless a question is open, another screen
-        (teach mode, the library, settings) is in front, or one was asked or skipped lately."""
+        (teach mode, the library, settings) is in front, or one was asked or skipped lately.
+        While a question is open, the engine asking again about the same sense (the place still
+        unknown) moves the answer to its newest window: the engine keeps only its last few
+        unknown windows, and a wearer answering after a minute and a half labelled a window
+        already dropped ("no such unknown window")."""
         if self._prompt is not None:
+            if event.sense == self._prompt.event.sense:
+                self._prompt.event = event
             return
         # the log says so when it asks, or once when another screen keeps it from asking; not
         # at every window the engine would ask at (the lines "hears an unknown place" say those)
@@ -307,7 +313,7 @@ class ServantApp(App[None]):
             skipped = scene is None and not prompt.withdrawn
             self._quiet_until = event.t + (PROMPT_AFTER_SKIP_S if skipped else PROMPT_EVERY_S)
             if scene:
-                self.label_unknown(event.window_id, scene)
+                self.label_unknown(prompt.event.window_id, scene)
 
         self.push_screen(prompt, answered)
 

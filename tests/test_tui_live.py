@@ -144,6 +144,26 @@ async def test_a_question_stays_through_a_window_or_a_decision_that_names_a_plac
         assert "question withdrawn" not in log_text(app)
 
 
+async def test_a_late_answer_labels_the_newest_window_asked_about(tmp_path):
+    """Seen in a walk: a question left open for a minute and a half was answered, and the
+    engine had already dropped the window it asked about (it keeps its last 16 unknowns), so
+    the label failed. The engine asking again about the sound moves the answer to its newest
+    window; a picture asked about meanwhile does not."""
+    engine = ReplayEngine(script=[UnknownScene(40.0, "audio", "cafe", "audio-1")])
+    app = ServantApp(engine, library_root=tmp_path)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await settle(pilot, lambda: isinstance(app.screen, LabelPrompt))
+        prompt = app.screen
+        engine.emit(UnknownScene(45.0, "audio", "cafe", "audio-2"))
+        engine.emit(UnknownScene(46.0, "image", "cafe", "image-3"))
+        await pilot.pause()
+        assert app.screen is prompt
+        await pilot.press(*"market", "enter")
+        await settle(pilot, lambda: engine.labels)
+        assert engine.labels == [("audio-2", "market")]
+        assert log_text(app).count("asking for a label") == 1
+
+
 async def test_errors_are_logged_and_notified_not_fatal(tmp_path):
     engine = ReplayEngine(
         script=[ErrorEvent(1.0, "camera: cannot open index 0; pick another in Settings")]
