@@ -29,7 +29,16 @@ kind of stay), wrong moves per hour of walking, seconds to the first right move 
 stay, and the share of untaught stays in which "What is this place?" was asked (and of taught
 stays, where it should not be).
 
-    OMP_NUM_THREADS=1 python bench/wearer_day.py [--sizes 2,3,5] [--draws 3] [--json FILE]
+`--answers`: a wearer who answers every "What is this place?" the app shows (at most once a
+minute, `PROMPT_EVERY_S`), at once, with the name of where they are: a taught place's name at it
+and at another recording of its kind (another café is "cafe" too), an untaught place's kind (a
+new place, with no pose: the arm never moves for it). Each answer goes through the engine's own
+`label_unknown` (written to a throw-away library, folded into the model), so the rest of the walk
+hears the grown model: what the learning loop does over a day. Without it the wearer never
+answers: the first hours after teach mode.
+
+    OMP_NUM_THREADS=1 python bench/wearer_day.py [--sizes 2,3,5] [--draws 3] [--answers]
+        [--json FILE]
 """
 
 from __future__ import annotations
@@ -38,6 +47,7 @@ import argparse
 import json
 import statistics
 import sys
+import tempfile
 import time
 from collections import defaultdict
 from dataclasses import dataclass
@@ -62,6 +72,8 @@ from servant_core.recognisers import FRESH_METHODS, make_recogniser  # noqa: E40
 from servant_core.settings import Settings  # noqa: E402
 
 BACKGROUND_PREFIX = "moodist-"
+# The app shows "What is this place?" at most this often (servant_tui.app.PROMPT_EVERY_S).
+PROMPT_EVERY_S = 60.0
 WINDOW_S = 5.0
 
 
@@ -69,6 +81,7 @@ WINDOW_S = 5.0
 class Stay:
     kind: str  # "taught", "taught kind", "untaught", "untaught, in the background"
     truth: str | None  # the taught place it is, None when untaught
+    scene: str  # the folder of its recording: what a wearer asked "What is this place?" answers
     windows: np.ndarray  # (n, samples) at the model's rate
     pictures: list[np.ndarray]
 
@@ -174,6 +187,7 @@ def plan_walk(data: Data, n_places: int, args: Any, rng: np.random.Generator) ->
                 Stay(
                     "taught",
                     scene,
+                    scene,
                     later[start : start + stay_windows],
                     pictures_of(later_paths, rng, 8),
                 )
@@ -183,6 +197,7 @@ def plan_walk(data: Data, n_places: int, args: Any, rng: np.random.Generator) ->
                 stays.append(
                     Stay(
                         "taught kind",
+                        scene,
                         scene,
                         other_windows[:stay_windows],
                         pictures_of(later_paths, rng, 8),
@@ -200,6 +215,7 @@ def plan_walk(data: Data, n_places: int, args: Any, rng: np.random.Generator) ->
                 Stay(
                     kind,
                     None,
+                    scene,
                     windows[:stay_windows],
                     pictures_of(data.pictures[looks], rng, 8),
                 )
@@ -213,8 +229,9 @@ def plan_walk(data: Data, n_places: int, args: Any, rng: np.random.Generator) ->
     }
 
 
-def walk(plan: dict[str, Any], rate: int) -> dict[str, Any]:
-    """Teach, then walk through the engine; what happened in each stay."""
+def walk(plan: dict[str, Any], rate: int, answering: bool = False) -> dict[str, Any]:
+    """Teach, then walk through the engine; what happened in each stay. `answering`: the wearer
+    answers "What is this place?" (`--answers`)."""
     audio = make_recogniser("audio", FRESH_METHODS["audio"])
     X, y = plan["audio"]
     audio.fit(audio.featurize(X), y)
@@ -239,15 +256,25 @@ def walk(plan: dict[str, Any], rate: int) -> dict[str, Any]:
     )
     link = RecordingLink(clock)
     engine.set_arm(link)  # the stand-in link (see the module docstring)
-    engine.set_action_learner(lambda scene, scores, confidence: {"place": scene})
-    asked: list[float] = []
-    engine.subscribe(
-        lambda e: asked.append(e.t) if isinstance(e, UnknownScene) and e.sense == "audio" else None
+    # a pose for each taught place; a place only labelled has none, as in the app
+    taught = set(plan["taught"])
+    engine.set_action_learner(
+        lambda scene, scores, confidence: {"place": scene} if scene in taught else None
     )
-    total = sum(len(s.windows) for s in stays) * WINDOW_S
-    engine.run_until(total + 0.5)
-    engine.stop()
+    asked: list[UnknownScene] = []
+    engine.subscribe(
+        lambda e: asked.append(e) if isinstance(e, UnknownScene) and e.sense == "audio" else None
+    )
     starts = np.concatenate([[0.0], np.cumsum([len(s.windows) * WINDOW_S for s in stays])])
+    total = float(starts[-1])
+    answers: list[tuple[float, str]] = []
+    with tempfile.TemporaryDirectory() as library:
+        engine.library_root = Path(library)  # where the answers are written, as in the app
+        for end in [*starts[1:], total + 0.5]:
+            engine.run_until(end)
+            if answering:
+                answers += answer(engine, asked, answers, stays, starts)
+    engine.stop()
     out = []
     for i, stay in enumerate(stays):
         begin, end = starts[i], starts[i + 1]
@@ -263,23 +290,48 @@ def walk(plan: dict[str, Any], rate: int) -> dict[str, Any]:
             else:
                 per_window.append("wrong")
         first_right = next((t - begin for t, p in moves if p == stay.truth), None)
+        times = [e.t for e in asked]
         out.append(
             {
                 "kind": stay.kind,
+                "scene": stay.scene,
                 "windows": per_window,
                 "first_right_s": first_right,
-                "asked": any(begin < t <= end + 1e-6 for t in asked),
+                "asked": any(begin < t <= end + 1e-6 for t in times),
                 # not about the last place's windows: after the stay's first two windows
-                "asked_late": any(begin + 2 * WINDOW_S < t <= end + 1e-6 for t in asked),
+                "asked_late": any(begin + 2 * WINDOW_S < t <= end + 1e-6 for t in times),
+                "answered": [name for t, name in answers if begin < t <= end + 1e-6],
             }
         )
     return {"stays": out, "hours": total / 3600}
+
+
+def answer(
+    engine: Engine,
+    asked: list[UnknownScene],
+    answered: list[tuple[float, str]],
+    stays: list[Stay],
+    starts: np.ndarray,
+) -> list[tuple[float, str]]:
+    """A wearer who answers: the newest question about the sound, if the app would show it (at
+    most once every `PROMPT_EVERY_S`), is answered at once with the name of the place the wearer
+    is in: a taught place's own name (also at another café when a café is taught), an untaught
+    place's kind (a new place, with no pose). Returns the answers given ((time, name))."""
+    if not asked:
+        return []
+    newest = asked[-1]
+    if answered and newest.t - answered[-1][0] < PROMPT_EVERY_S:
+        return []
+    stay = stays[min(int(np.searchsorted(starts, newest.t, side="left")) - 1, len(stays) - 1)]
+    engine.label_unknown(newest.window_id, stay.scene)
+    return [(newest.t, stay.scene)]
 
 
 def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
     by_kind: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
     asked: dict[str, list[bool]] = defaultdict(list)
     asked_late: dict[str, list[bool]] = defaultdict(list)
+    answered: dict[str, int] = defaultdict(int)
     first: list[float] = []
     never = 0
     wrong_moves, hours = 0, 0.0
@@ -291,6 +343,7 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
             wrong_moves += stay["windows"].count("wrong")
             asked[stay["kind"]].append(stay["asked"])
             asked_late[stay["kind"]].append(stay["asked_late"])
+            answered[stay["kind"]] += len(stay["answered"])
             if stay["kind"] == "taught":
                 if stay["first_right_s"] is None:
                     never += 1
@@ -319,6 +372,7 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
         "right_after_10s": settled.count("right") / max(len(settled), 1),
         "asked": {kind: float(np.mean(v)) for kind, v in asked.items()},
         "asked_late": {kind: float(np.mean(v)) for kind, v in asked_late.items()},
+        "answered": dict(answered),
     }
 
 
@@ -331,6 +385,11 @@ def main() -> int:
     parser.add_argument("--pictures", type=int, default=6, help="pictures taught a place")
     parser.add_argument("--stay", type=float, default=40.0, help="seconds a stay lasts")
     parser.add_argument("--json", type=Path)
+    parser.add_argument(
+        "--answers",
+        action="store_true",
+        help='the wearer answers "What is this place?" with its name (at most once a minute)',
+    )
     args = parser.parse_args()
     if not (args.data / "audio" / "dev").is_dir():
         print(f"no real data at {args.data}; nothing to measure")
@@ -350,7 +409,7 @@ def main() -> int:
         for draw in range(args.draws):
             plan = plan_walk(data, size, args, np.random.default_rng([size, draw]))
             with library_noise_silenced():
-                runs.append(walk(plan, rate))
+                runs.append(walk(plan, rate, args.answers))
             print(f"  {size} places, draw {draw}: {', '.join(plan['taught'])}", flush=True)
         result = summarise(runs)
         figures[size] = {**result, "runs": runs}
@@ -361,6 +420,7 @@ def main() -> int:
                 f"wrong {share['wrong']:.3f}  none {share['none']:.3f}  "
                 f"asked in {result['asked'][kind]:.2f} of stays "
                 f"({result['asked_late'][kind]:.2f} after their first 10 s)"
+                + (f", answered {result['answered'].get(kind, 0)}" if args.answers else "")
             )
         print(
             f"  wrong moves per hour of walking {result['wrong_moves_per_hour']:.1f}; first right "
