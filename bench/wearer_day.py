@@ -2,7 +2,8 @@
 
 For each library size (2, 3 and 5 places) and each draw, places are drawn among the scenes that
 have both recordings and pictures in `../shared/data`; each is taught as teach mode does: the
-first `--shots` windows (5 s each) of one of its recordings and `--pictures` of its pictures.
+first `--shots` windows (5 s each; teach mode asks for six, `TEACH_WINDOWS`) of one of its
+recordings and `--pictures` of its pictures.
 The recognisers are Servant's defaults (`kmeans-encoder`, `fisher-bovw`), fitted as a retrain
 fits them. Then the wearer walks through stays of `--stay` seconds, in a random order:
 
@@ -67,7 +68,7 @@ from servant_core.engine.core import Engine  # noqa: E402
 from servant_core.engine.factories import live_policy, steady  # noqa: E402
 from servant_core.events import UnknownScene  # noqa: E402
 from servant_core.fusion.sequential import FusionConfig  # noqa: E402
-from servant_core.library import read_picture  # noqa: E402
+from servant_core.library import TEACH_WINDOWS, read_picture  # noqa: E402
 from servant_core.recognisers import FRESH_METHODS, make_recogniser  # noqa: E402
 from servant_core.settings import Settings  # noqa: E402
 
@@ -164,6 +165,12 @@ def pictures_of(paths: list[Path], rng: np.random.Generator, n: int) -> list[np.
     return [read_picture(paths[i]) for i in chosen]
 
 
+def walk_from(args: Any) -> int:
+    """The window of a taught recording its walk starts at: after the taught windows, or at
+    `--from-window` (libraries taught for different lengths walked through the same windows)."""
+    return max(args.shots, args.from_window or 0)
+
+
 def plan_walk(data: Data, n_places: int, args: Any, rng: np.random.Generator) -> dict[str, Any]:
     """Draw the taught places and their teach-mode library, and the walk's stays."""
     taught = sorted(rng.choice(data.both, n_places, replace=False).tolist())
@@ -181,7 +188,7 @@ def plan_walk(data: Data, n_places: int, args: Any, rng: np.random.Generator) ->
         picture_X += [read_picture(p) for p in paths[: args.pictures]]
         picture_y += [scene] * args.pictures
         later_paths = paths[args.pictures :]
-        later = windows[args.shots :]
+        later = windows[walk_from(args) :]
         for start in range(0, len(later) - stay_windows + 1, stay_windows):
             stays.append(
                 Stay(
@@ -381,7 +388,18 @@ def main() -> int:
     parser.add_argument("--data", type=Path, default=shared_data())
     parser.add_argument("--sizes", default="2,3,5")
     parser.add_argument("--draws", type=int, default=3)
-    parser.add_argument("--shots", type=int, default=3, help="windows taught a place")
+    parser.add_argument(
+        "--shots",
+        type=int,
+        default=TEACH_WINDOWS,
+        help="windows taught a place (default: what teach mode asks for)",
+    )
+    parser.add_argument(
+        "--from-window",
+        type=int,
+        default=0,
+        help="taught stays start at this window of the recording (default: after the taught ones)",
+    )
     parser.add_argument("--pictures", type=int, default=6, help="pictures taught a place")
     parser.add_argument("--stay", type=float, default=40.0, help="seconds a stay lasts")
     parser.add_argument("--json", type=Path)
@@ -397,7 +415,7 @@ def main() -> int:
     rate = make_recogniser("audio", FRESH_METHODS["audio"]).rate
     start = time.time()
     with library_noise_silenced():
-        data = Data(args.data, rate, max_windows=args.shots + 4 * int(args.stay / WINDOW_S))
+        data = Data(args.data, rate, max_windows=walk_from(args) + 4 * int(args.stay / WINDOW_S))
     print(
         f"{sum(len(r) for r in data.recordings.values())} recordings, scenes with pictures and "
         f"sound: {', '.join(data.both)}; {args.draws} draws a size, {args.shots} windows and "

@@ -29,6 +29,11 @@ from servant_core.storage import open_regular_file, os_reason, walk_files
 # damaged or hostile (a 1 MB PNG can claim gigabytes). Checked before decoding.
 MAX_PICTURE_PIXELS = 50_000_000
 MAX_PICTURE_BYTES = 64 * 1024 * 1024
+# The windows of sound teach mode asks for a place: six presses of *Record 5 s*, 30 s. On the
+# wearer's walk (bench/wearer_day.py, the same later windows) a place taught 30 s got a right move
+# in far more of its later windows than one taught 15 s, with wrong moves at places never taught
+# still under 2 % (docs/research.md, issue 21, eighth session).
+TEACH_WINDOWS = 6
 # One-window recordings of a place (teach mode's presses, windows labelled live) made no more than
 # this apart are one visit (`visits_of`).
 VISIT_GAP_SECONDS = 30 * 60

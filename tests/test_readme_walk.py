@@ -10,8 +10,9 @@ in Settings while the app runs (step 1: no restart).
 
 1. Connect: `s`, the camera and the arm's port typed into Settings, Ctrl-S, escape: the status
    line says ✓ for both.
-2. Teach two places by keyboard: a name, Enter; Enter on *Record 5 s* twice; Ctrl-N, Enter on
-   *Take picture* three times; Ctrl-N, the angles, *Add sample*; *Teach another scene*.
+2. Teach two places by keyboard: a name, Enter; Enter on *Record 5 s* six times (what teach mode
+   asks for); Ctrl-N, Enter on *Take picture* three times; Ctrl-N, the angles, *Add sample*;
+   *Teach another scene*.
 3. Retrain: Ctrl-N to *Train*, Enter (the poses), Enter (*Retrain recognisers*).
 4. Arm: escape, `a`: ARMED.
 5. Watch: walk into the café: `CafeScene detected`, and the emulator receives the café's pose.
@@ -32,6 +33,7 @@ import numpy as np
 import pytest
 
 from servant_core.demo.scenes import synth_picture
+from servant_core.library import TEACH_WINDOWS
 from tests.test_live_path import POSES, scene_sound
 from tests.test_microphone import play
 from tests.test_microphone import virtual_mic as virtual_mic  # a fixture
@@ -131,7 +133,7 @@ def teach_place(term: Terminal, place: str, pose: dict[str, float]) -> None:
     term.wait_for("app", r"Pick the scene you are in", 20)
     term.type("app", place)  # the name field has the focus; Enter: *Use this scene*
     term.wait_for("app", rf"teaching {place}", 10)
-    for n in (1, 2):
+    for n in range(1, TEACH_WINDOWS + 1):
         term.keys("app", "Enter")  # *Record 5 s*
         term.wait_for("app", rf"{n} window\(s\) recorded", 30)
     term.keys("app", "C-n")

@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import pytest
 from textual import events
-from textual.widgets import ContentSwitcher, DataTable, Input, Sparkline
+from textual.widgets import ContentSwitcher, DataTable, Input, Label, Sparkline, Static
 
 from servant_core.audio import write_wav
+from servant_core.library import TEACH_WINDOWS
 from servant_tui.app import ServantApp
 from servant_tui.screens.teach import TeachScreen
 from tests.test_tui_live import settle
@@ -130,15 +131,20 @@ async def teaching_a_new_scene(pilot, app) -> TeachScreen:
 
 async def test_enter_records_window_after_window_from_the_keyboard(tmp_path, monkeypatch):
     """A wearer on the keyboard: Enter on *Record 5 s*, and again once it is done. Disabling the
-    button while it recorded took the focus away, so the second Enter recorded nothing."""
+    button while it recorded took the focus away, so the second Enter recorded nothing. The step
+    says how many windows teach mode asks for and how many are still to go."""
     app = noise_app(tmp_path, monkeypatch)
     async with app.run_test(size=(120, 40)) as pilot:
         screen = await teaching_a_new_scene(pilot, app)
+        asks = str(screen.query_one("#sound Label", Label).render())
+        assert f"{TEACH_WINDOWS} times" in asks, asks
         screen.query_one("#record").focus()
         for k in (1, 2):
             await settle(pilot, lambda: not screen.query_one("#record").disabled)
             await pilot.press("enter")
             await settle(pilot, lambda k=k: screen.windows == k, tries=400)
+            said = str(screen.query_one("#sound-status", Static).render())
+            assert said.startswith(f"{k} window(s) recorded, {TEACH_WINDOWS - k} more to go;")
 
 
 async def test_keys_typed_in_a_burst_after_a_step_change_reach_the_step_shown(

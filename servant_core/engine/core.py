@@ -549,7 +549,8 @@ class Engine:
         only then is the wearer asked "What is this place?", and at each window while it holds
         (the app limits how often the question is shown). The windows of that stretch are kept
         (`_unknown_windows`): the label the wearer gives is for all of them, not the last 5 s
-        alone, so the place is learned from as much as teach mode's three presses give."""
+        alone, so the place is learned from as much as teach mode asks for (`TEACH_WINDOWS`,
+        30 s)."""
         if known:
             self._unknown_windows.clear()
             return False

@@ -44,7 +44,7 @@ from servant_core.errors import ServantError
 from servant_core.event_text import angle_text, pose_text
 from servant_core.events import SpectrumFrame
 from servant_core.features.palette import dominant_colours
-from servant_core.library import SceneLibrary
+from servant_core.library import TEACH_WINDOWS, SceneLibrary
 from servant_core.senses import SENSES
 from servant_core.storage import atomic_write_bytes
 from servant_tui.messages import (
@@ -181,7 +181,9 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
                 with Vertical(id="sound"):
                     yield Label(
                         f"Record {DEFAULT_WINDOW_SECONDS:g} s of the place's sound"
-                        f"{self._with_senses()}. Record a few."
+                        f"{self._with_senses()}, {TEACH_WINDOWS} times: the place is recognised "
+                        f"far more often from {TEACH_WINDOWS * DEFAULT_WINDOW_SECONDS:g} s than "
+                        "from a few."
                     )
                     yield every_press(
                         Button(
@@ -400,8 +402,10 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
         self.windows += 1
         self.query_one("#record-progress", ProgressBar).update(progress=DEFAULT_WINDOW_SECONDS)
         logs = ", ".join(p.name for p in message.samples)
+        left = TEACH_WINDOWS - self.windows
+        more = f", {left} more to go" if left > 0 else ""
         self.query_one("#sound-status", Static).update(
-            f"{self.windows} window(s) recorded; last: {message.path.name} "
+            f"{self.windows} window(s) recorded{more}; last: {message.path.name} "
             f"({message.seconds:.1f} s)" + (f" with {logs}" if logs else "")
         )
         for path in (message.path, *message.samples):
