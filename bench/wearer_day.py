@@ -236,9 +236,12 @@ def plan_walk(data: Data, n_places: int, args: Any, rng: np.random.Generator) ->
     }
 
 
-def walk(plan: dict[str, Any], rate: int, answering: bool = False) -> dict[str, Any]:
+def walk(
+    plan: dict[str, Any], rate: int, answering: bool = False, threshold: float | None = None
+) -> dict[str, Any]:
     """Teach, then walk through the engine; what happened in each stay. `answering`: the wearer
-    answers "What is this place?" (`--answers`)."""
+    answers "What is this place?" (`--answers`); `threshold`: the arm's confidence threshold in
+    percent (None: the user's default)."""
     audio = make_recogniser("audio", FRESH_METHODS["audio"])
     X, y = plan["audio"]
     audio.fit(audio.featurize(X), y)
@@ -258,7 +261,7 @@ def walk(plan: dict[str, Any], rate: int, answering: bool = False) -> dict[str, 
         visual=visual,
         fusion=live_policy("parallel", FusionConfig()),
         clock=clock,
-        confidence_threshold=user.confidence_threshold,
+        confidence_threshold=user.confidence_threshold if threshold is None else threshold,
         smoother=steady(),
     )
     link = RecordingLink(clock)
@@ -404,6 +407,11 @@ def main() -> int:
     parser.add_argument("--stay", type=float, default=40.0, help="seconds a stay lasts")
     parser.add_argument("--json", type=Path)
     parser.add_argument(
+        "--threshold",
+        type=float,
+        help="the arm's confidence threshold in percent (default: the Settings default)",
+    )
+    parser.add_argument(
         "--answers",
         action="store_true",
         help='the wearer answers "What is this place?" with its name (at most once a minute)',
@@ -427,7 +435,7 @@ def main() -> int:
         for draw in range(args.draws):
             plan = plan_walk(data, size, args, np.random.default_rng([size, draw]))
             with library_noise_silenced():
-                runs.append(walk(plan, rate, args.answers))
+                runs.append(walk(plan, rate, args.answers, args.threshold))
             print(f"  {size} places, draw {draw}: {', '.join(plan['taught'])}", flush=True)
         result = summarise(runs)
         figures[size] = {**result, "runs": runs}
