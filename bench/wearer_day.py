@@ -38,8 +38,8 @@ new place, with no pose: the arm never moves for it). Each answer goes through t
 hears the grown model: what the learning loop does over a day. Without it the wearer never
 answers: the first hours after teach mode.
 
-    OMP_NUM_THREADS=1 python bench/wearer_day.py [--sizes 2,3,5] [--draws 3] [--answers]
-        [--json FILE]
+    OMP_NUM_THREADS=1 python bench/wearer_day.py [--sizes 2,3,5] [--draws 3] [--shots N]
+        [--from-window N] [--threshold PERCENT] [--answers] [--json FILE]
 """
 
 from __future__ import annotations
