@@ -88,7 +88,7 @@ ASK_AFTER_S = 30.0
 
 NO_MODEL = (
     "no model yet: nothing can be recognised until two scenes are taught (teach mode, key t: "
-    "5 s of sound and a few pictures of each, then Retrain) or a model is given "
+    "six 5 s recordings and a few pictures of each, then Retrain) or a model is given "
     "(`servant train LIBRARY -o model.npz`, then --model)"
 )
 
