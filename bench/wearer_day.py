@@ -71,10 +71,9 @@ from servant_core.fusion.sequential import FusionConfig  # noqa: E402
 from servant_core.library import TEACH_WINDOWS, read_picture  # noqa: E402
 from servant_core.recognisers import FRESH_METHODS, make_recogniser  # noqa: E402
 from servant_core.settings import Settings  # noqa: E402
+from servant_tui.app import PROMPT_EVERY_S  # noqa: E402  (how often the app asks)
 
 BACKGROUND_PREFIX = "moodist-"
-# The app shows "What is this place?" at most this often (servant_tui.app.PROMPT_EVERY_S).
-PROMPT_EVERY_S = 60.0
 WINDOW_S = 5.0
 
 
@@ -285,6 +284,7 @@ def walk(
             if answering:
                 answers += answer(engine, asked, answers, stays, starts)
     engine.stop()
+    times = [e.t for e in asked]
     out = []
     for i, stay in enumerate(stays):
         begin, end = starts[i], starts[i + 1]
@@ -300,7 +300,6 @@ def walk(
             else:
                 per_window.append("wrong")
         first_right = next((t - begin for t, p in moves if p == stay.truth), None)
-        times = [e.t for e in asked]
         out.append(
             {
                 "kind": stay.kind,
