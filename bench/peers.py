@@ -22,7 +22,9 @@ pyAudioAnalysis is not among them: its 0.3.14 sdist declares no dependencies, ye
 modules import matplotlib, tqdm, eyeD3 and pydub (and `aifc`, gone in Python 3.13) at import
 time; it is no clean bench-only extra, so it stays out.
 
-Servant's rows: `codebook` and `kmeans-encoder` (`paper` is far too slow for twenty-odd folds).
+Servant's rows: `codebook`, `kmeans-encoder` and `birdnet` (which resamples the windows to its
+model's 48 kHz, so it hears nothing above 11 kHz here, and has no background at 22,050 Hz; `paper`
+is far too slow for twenty-odd folds).
 The picture rows come from `bench/picture_peers.py` (`picture_rows`) when it is present.
 
     OMP_NUM_THREADS=1 python bench/peers.py [--data ../shared/data] [--seeds 1] [--json FILE]
@@ -71,7 +73,7 @@ from servant_core.recognisers.background import kept_out  # noqa: E402
 RATE = 22050
 WINDOW_SECONDS = 5.0
 SHOTS = (1, 2, 3, 5, 10)
-SERVANT_METHODS = ("codebook", "kmeans-encoder")
+SERVANT_METHODS = ("codebook", "kmeans-encoder", "birdnet")
 INNER_FOLDS = 3
 # The issue-23 targets: a recording, or a source, never heard over the scenes with at least
 # three recordings (a scene with fewer has one or two left to learn from).

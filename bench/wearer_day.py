@@ -39,12 +39,13 @@ hears the grown model: what the learning loop does over a day. Without it the we
 answers: the first hours after teach mode.
 
     OMP_NUM_THREADS=1 python bench/wearer_day.py [--sizes 2,3,5] [--draws 3] [--shots N]
-        [--from-window N] [--threshold PERCENT] [--answers] [--json FILE]
+        [--from-window N] [--threshold PERCENT] [--audio-method NAME] [--answers] [--json FILE]
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import statistics
 import sys
@@ -236,12 +237,17 @@ def plan_walk(data: Data, n_places: int, args: Any, rng: np.random.Generator) ->
 
 
 def walk(
-    plan: dict[str, Any], rate: int, answering: bool = False, threshold: float | None = None
+    plan: dict[str, Any],
+    rate: int,
+    answering: bool = False,
+    threshold: float | None = None,
+    audio_method: str = FRESH_METHODS["audio"],
 ) -> dict[str, Any]:
     """Teach, then walk through the engine; what happened in each stay. `answering`: the wearer
     answers "What is this place?" (`--answers`); `threshold`: the arm's confidence threshold in
-    percent (None: the user's default)."""
-    audio = make_recogniser("audio", FRESH_METHODS["audio"])
+    percent (None: the user's default); `audio_method`: the sound's recogniser."""
+    audio = make_recogniser("audio", audio_method)
+    audio.featurize = remembered(audio.featurize)  # type: ignore[method-assign]
     X, y = plan["audio"]
     audio.fit(audio.featurize(X), y)
     visual = make_recogniser("image", FRESH_METHODS["image"])
@@ -313,6 +319,26 @@ def walk(
             }
         )
     return {"stays": out, "hours": total / 3600}
+
+
+# Each window's features by its bytes, kept across draws: `featurize` depends only on the method's
+# parameters (recognisers.base), and every draw walks through the same recordings' windows, so a
+# window is featurized once a run (`birdnet` takes 0.1 s a window: most of a draw's time).
+FEATURES: dict[tuple[str, bytes], np.ndarray] = {}
+
+
+def remembered(featurize: Any) -> Any:
+    def featurize_once(windows: np.ndarray) -> np.ndarray:
+        windows = np.asarray(windows, dtype=np.float32)
+        owner = type(featurize.__self__).__name__
+        keys = [(owner, hashlib.sha1(w.tobytes()).digest()) for w in windows]
+        missing = [i for i, k in enumerate(keys) if k not in FEATURES]
+        if missing:
+            for i, row in zip(missing, featurize(windows[missing]), strict=True):
+                FEATURES[keys[i]] = row
+        return np.stack([FEATURES[k] for k in keys])
+
+    return featurize_once
 
 
 def answer(
@@ -411,6 +437,11 @@ def main() -> int:
         help="the arm's confidence threshold in percent (default: the Settings default)",
     )
     parser.add_argument(
+        "--audio-method",
+        default=FRESH_METHODS["audio"],
+        help="the sound's recogniser (default: what a retrain fits, %(default)s)",
+    )
+    parser.add_argument(
         "--answers",
         action="store_true",
         help='the wearer answers "What is this place?" with its name (at most once a minute)',
@@ -419,14 +450,14 @@ def main() -> int:
     if not (args.data / "audio" / "dev").is_dir():
         print(f"no real data at {args.data}; nothing to measure")
         return 0
-    rate = make_recogniser("audio", FRESH_METHODS["audio"]).rate
+    rate = make_recogniser("audio", args.audio_method).rate
     start = time.time()
     with library_noise_silenced():
         data = Data(args.data, rate, max_windows=walk_from(args) + 4 * int(args.stay / WINDOW_S))
     print(
         f"{sum(len(r) for r in data.recordings.values())} recordings, scenes with pictures and "
         f"sound: {', '.join(data.both)}; {args.draws} draws a size, {args.shots} windows and "
-        f"{args.pictures} pictures a place, stays of {args.stay:g} s"
+        f"{args.pictures} pictures a place, stays of {args.stay:g} s, sound by {args.audio_method}"
     )
     figures = {}
     for size in [int(s) for s in args.sizes.split(",")]:
@@ -434,7 +465,7 @@ def main() -> int:
         for draw in range(args.draws):
             plan = plan_walk(data, size, args, np.random.default_rng([size, draw]))
             with library_noise_silenced():
-                runs.append(walk(plan, rate, args.answers, args.threshold))
+                runs.append(walk(plan, rate, args.answers, args.threshold, args.audio_method))
             print(f"  {size} places, draw {draw}: {', '.join(plan['taught'])}", flush=True)
         result = summarise(runs)
         figures[size] = {**result, "runs": runs}

@@ -8,6 +8,7 @@ from typing import Any, cast
 from servant_core.choices import FRESH_AUDIO_METHOD, FRESH_IMAGE_METHOD
 from servant_core.errors import ServantError
 from servant_core.recognisers.base import UNKNOWN, AcousticRecogniser, Recogniser
+from servant_core.recognisers.birdnet import BirdnetAcousticRecogniser
 from servant_core.recognisers.bovw import BovwVisualRecogniser
 from servant_core.recognisers.codebook import CodebookAcousticRecogniser
 from servant_core.recognisers.fisher_bovw import FisherBovwVisualRecogniser
@@ -20,6 +21,7 @@ ACOUSTIC_METHODS: dict[str, type[Recogniser]] = {
     "paper": PaperAcousticRecogniser,
     "codebook": CodebookAcousticRecogniser,
     "kmeans-encoder": KMeansEncoderAcousticRecogniser,
+    "birdnet": BirdnetAcousticRecogniser,
 }
 VISUAL_METHODS: dict[str, type[Recogniser]] = {
     "paper": PaperVisualRecogniser,

@@ -49,10 +49,16 @@ def quantised(frames: np.ndarray) -> tuple[np.ndarray, float, float]:
 
 
 def save_background(
-    path: Path, frames: np.ndarray, recordings: list[str], params: dict[str, Any]
+    path: Path,
+    frames: np.ndarray,
+    recordings: list[str],
+    params: dict[str, Any],
+    keys: Sequence[str] = FRAME_KEYS,
 ) -> None:
+    """Write featurized background windows (`frames`, any shape a window) and their recordings'
+    names; `keys`: the featurizer parameters (of `params`) a model must share to use them."""
     codes, low, step = quantised(frames)
-    header = {"params": {k: params[k] for k in FRAME_KEYS}, "low": low, "step": step}
+    header = {"params": {k: params[k] for k in keys}, "low": low, "step": step}
     np.savez_compressed(
         path,
         header=np.array(json.dumps(header)),
@@ -66,13 +72,14 @@ def load_background(
 ) -> Background | None:
     """The background frames for a featurizer with `params`, without the windows of recordings
     named in `exclude` (file names, compared without their folders); None when there is no
-    background file or its frames were made with other featurizer parameters."""
+    background file or its frames were made with other featurizer parameters (those the file
+    names)."""
     path = BACKGROUND_PATH if path is None else path
     if not path.is_file():
         return None
     with np.load(path, allow_pickle=False) as data:
         header = json.loads(str(data["header"]))
-        if any(header["params"][k] != params[k] for k in FRAME_KEYS):
+        if any(params.get(k) != v for k, v in header["params"].items()):
             return None
         codes, recordings = data["codes"], data["recordings"].astype(str)
     excluded = {Path(name).name for name in exclude}

