@@ -23,7 +23,7 @@ VISUAL_METHOD_NAMES = ("paper", "bovw", "softbovw", "fisher-bovw")
 # What a retrain fits for sound and pictures when there is no recogniser yet, and what `servant
 # train` and the demo use: the methods beyond the paper that lead on the wearer's walk and every
 # protocol (docs/research.md). A sample sense has one method (`senses.SAMPLE_METHOD`).
-FRESH_AUDIO_METHOD = "kmeans-encoder"
+FRESH_AUDIO_METHOD = "birdnet"
 FRESH_IMAGE_METHOD = "fisher-bovw"
 
 POLICY_NAMES = ("sequential", "parallel", "learned")

@@ -179,14 +179,17 @@ class BirdnetAcousticRecogniser(KMeansEncoderAcousticRecogniser):
             if self.background
             else None
         )
-        B = np.empty((0, D.shape[1])) if found is None else found.frames.astype(np.float64)
-        B = B.reshape(len(B), -1)
+        B = (
+            np.empty((0, D.shape[1]))
+            if found is None
+            else found.frames.reshape(len(found.frames), -1).astype(np.float64)
+        )
         both = np.vstack([D, B])
         spread = both.std(axis=0)
         self.descriptor_mean_ = both.mean(axis=0)
         self.descriptor_scale_ = np.maximum(spread, SCALE_FLOOR * np.median(spread) + 1e-12)
         self.train_descriptors_ = self._standardise(D)
-        self.background_descriptors_ = self._standardise(B) if len(B) else np.empty((0, D.shape[1]))
+        self.background_descriptors_ = self._standardise(B)
         scenes_arr = np.asarray(scenes).astype(str)
         self.train_scenes_ = scenes_arr
         self.train_visits_ = scenes_arr if visits is None else np.asarray(visits).astype(str)
