@@ -24,6 +24,14 @@ CONSOLE_SCRIPT = (
 SERVANT = "import sys; from servant_tui.main import main; sys.exit(main())"  # no 'R' first
 
 
+def ctrl_c_as_in_a_terminal() -> None:
+    """In the child, before Python starts: Ctrl-C as a terminal delivers it. Tests started in
+    the background by a non-interactive shell (`make test &`) inherit SIGINT ignored, and a
+    Python started so never sees Ctrl-C at all: every test here would fail, saying nothing of
+    Servant."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def interrupted(script: str, tmp_path, after: float = 0.0) -> tuple[bytes, int]:
     """(stderr, status) of `servant eval image TMP` run by `script`, given Ctrl-C `after`
     seconds past the 'R' the script writes."""
@@ -32,6 +40,7 @@ def interrupted(script: str, tmp_path, after: float = 0.0) -> tuple[bytes, int]:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         cwd=REPO,
+        preexec_fn=ctrl_c_as_in_a_terminal,
     )
     assert child.stdout is not None and child.stdout.read(1) == b"R"
     time.sleep(after)
@@ -163,6 +172,8 @@ def test_ctrl_c_that_python_would_ignore_during_an_import_still_ends_the_command
     printed: list[object] = []
     before = sys.unraisablehook
     sys.unraisablehook = interrupts_not_ignored(printed.append)
+    # Ctrl-C handled by Python, as in a terminal (see `ctrl_c_as_in_a_terminal`)
+    handler = signal.signal(signal.SIGINT, signal.default_int_handler)
 
     class Held:
         pass
@@ -180,6 +191,7 @@ def test_ctrl_c_that_python_would_ignore_during_an_import_still_ends_the_command
         assert ref() is None
     finally:
         sys.unraisablehook = before
+        signal.signal(signal.SIGINT, handler)
     assert printed == []  # nothing printed; another unraisable error would still be
     hook = interrupts_not_ignored(printed.append)
     other = type("Info", (), {"exc_value": ValueError("x")})()
