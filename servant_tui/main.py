@@ -73,6 +73,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     # printed a traceback
     try:
         sys.unraisablehook = interrupts_not_ignored(sys.unraisablehook)
+        noting_interrupts()
         from servant_core.threads import one_thread_pools
 
         one_thread_pools()  # before numpy loads
@@ -85,8 +86,36 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise
 
 
+_interrupts_seen: list[int] = []  # each Ctrl-C, as `noting_interrupts` handles it
+
+
+def noting_interrupts() -> None:
+    """Handle Ctrl-C as Python does (KeyboardInterrupt), noting that it came: one landing while
+    an extension module initialises can reach the caller as a plain ImportError, its
+    KeyboardInterrupt swallowed in C (numpy at 0.05 s: "PyCapsule_Import could not import module
+    'datetime'"), which only the note tells from a broken install. Where Ctrl-C is ignored
+    (started in the background), it stays ignored."""
+    import signal
+
+    _interrupts_seen.clear()  # a run of its own (tests call `main` again in one process)
+    if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        return  # ignored, or noted already
+
+    def noted(signum: int, frame: Any) -> None:
+        _interrupts_seen.append(signum)
+        signal.default_int_handler(signum, frame)
+
+    try:
+        signal.signal(signal.SIGINT, noted)
+    except ValueError:  # not the main thread: Ctrl-C is not delivered here anyway
+        pass
+
+
 def _interrupted(error: BaseException) -> bool:
-    """Whether `error` was caused by Ctrl-C (a KeyboardInterrupt in its chain)."""
+    """Whether `error` was caused by Ctrl-C (it came while `main` ran, or a KeyboardInterrupt is
+    in its chain)."""
+    if _interrupts_seen:
+        return True
     seen: set[int] = set()
     cause: BaseException | None = error
     while cause is not None and id(cause) not in seen:

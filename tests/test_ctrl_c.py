@@ -81,6 +81,34 @@ def test_ctrl_c_in_the_first_import_of_main_is_quiet(tmp_path) -> None:
     assert code == 130
 
 
+# The child is slowed in the first import `main` makes, says 'R' there, and turns Ctrl-C into a
+# plain ImportError, its KeyboardInterrupt gone: what numpy's C initialisation did with Ctrl-C at
+# 0.05 s in a fresh clone's full run ("PyCapsule_Import could not import module 'datetime'")
+SWALLOWED_IN_C = (
+    "import os, sys, time\n"
+    "class Swallowing:\n"
+    "    def find_spec(self, name, path=None, target=None):\n"
+    "        if name == 'servant_core.threads':\n"
+    "            os.write(1, b'R')\n"
+    "            swallowed = False\n"
+    "            try:\n"
+    "                time.sleep(5)\n"
+    "            except KeyboardInterrupt:\n"
+    "                swallowed = True\n"
+    "            if swallowed:\n"
+    "                raise ImportError('PyCapsule_Import could not import module \"datetime\"')\n"
+    "        return None\n"
+    "sys.meta_path.insert(0, Swallowing())\n"
+    "from servant_tui.main import main; sys.exit(main())\n"
+)
+
+
+def test_ctrl_c_that_an_extension_turned_into_an_import_error_is_quiet(tmp_path) -> None:
+    err, code = interrupted(SWALLOWED_IN_C, tmp_path)
+    assert err == b"", err.decode()
+    assert code == 130
+
+
 @pytest.mark.parametrize(
     "argv",
     [
