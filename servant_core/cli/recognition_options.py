@@ -97,7 +97,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--method",
         choices=sorted(ACOUSTIC_METHOD_NAMES),
         default=FRESH_AUDIO_METHOD,
-        help="acoustic method (paper: the paper's FFT K-Means)",
+        help=(
+            "acoustic method (paper: the paper's FFT K-Means; birdnet: BirdNET's network, "
+            "non-commercial use only, CC BY-NC-SA 4.0; kmeans-encoder: Servant's own)"
+        ),
     )
     audio.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
     audio.add_argument(
@@ -168,7 +171,10 @@ def _method_options(parser: argparse.ArgumentParser, paper: bool = False) -> Non
         "--audio-method",
         choices=sorted(ACOUSTIC_METHOD_NAMES),
         default="paper" if paper else FRESH_AUDIO_METHOD,
-        help="acoustic method (paper: the paper's FFT K-Means)",
+        help=(
+            "acoustic method (paper: the paper's FFT K-Means; birdnet: BirdNET's network, "
+            "non-commercial use only, CC BY-NC-SA 4.0; kmeans-encoder: Servant's own)"
+        ),
     )
     parser.add_argument(
         "--image-method",
