@@ -34,9 +34,7 @@ import numpy as np
 
 from servant_core.audio import resample
 from servant_core.errors import ServantError
-from servant_core.recognisers.background import load_background
-from servant_core.recognisers.base import check_training_scenes
-from servant_core.recognisers.kmeans_encoder import SCALE_FLOOR, KMeansEncoderAcousticRecogniser
+from servant_core.recognisers.kmeans_encoder import KMeansEncoderAcousticRecogniser
 
 BIRDNET_RATE = 48000
 CROP_SAMPLES = 3 * BIRDNET_RATE  # the model's input: 3 s
@@ -168,26 +166,12 @@ class BirdnetAcousticRecogniser(KMeansEncoderAcousticRecogniser):
         visits: Sequence[Any] | np.ndarray | None = None,
     ) -> Self:
         """Learn the places of embedded windows `X` (`visits` as `kmeans-encoder`'s)."""
-        check_training_scenes(scenes, len(X))
-        if visits is not None and len(visits) != len(X):
-            raise ValueError(f"{len(X)} feature rows but {len(visits)} visit labels")
-        if not self.temperature > 0:
-            raise ValueError(f"temperature must be above 0, not {self.temperature!r}")
+        self._check_fit(X, scenes, visits)
         D = np.asarray(X, dtype=np.float64)
-        found = (
-            load_background(self.background_params(), self.background_exclude, self.background_path)
-            if self.background
-            else None
-        )
-        B = (
-            np.empty((0, D.shape[1]))
-            if found is None
-            else found.frames.reshape(len(found.frames), -1).astype(np.float64)
-        )
-        both = np.vstack([D, B])
-        spread = both.std(axis=0)
-        self.descriptor_mean_ = both.mean(axis=0)
-        self.descriptor_scale_ = np.maximum(spread, SCALE_FLOOR * np.median(spread) + 1e-12)
+        found = self._background()
+        B = np.empty((0, D.shape[1])) if found is None else found.frames.astype(np.float64)
+        B = B.reshape(len(B), D.shape[1])
+        self._fit_scale(np.vstack([D, B]))
         self.train_descriptors_ = self._standardise(D)
         self.background_descriptors_ = self._standardise(B)
         scenes_arr = np.asarray(scenes).astype(str)

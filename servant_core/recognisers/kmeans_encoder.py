@@ -61,7 +61,12 @@ from sklearn.exceptions import NotFittedError
 from sklearn.linear_model import LogisticRegression
 
 from servant_core.features.logmel import DEFAULT_FMAX, DEFAULT_FMIN, log_mel_windows
-from servant_core.recognisers.background import BACKGROUND_PATH, FRAME_KEYS, load_background
+from servant_core.recognisers.background import (
+    BACKGROUND_PATH,
+    FRAME_KEYS,
+    Background,
+    load_background,
+)
 from servant_core.recognisers.base import PERCENT, check_training_scenes, init_params
 from servant_core.recognisers.centroids import SceneCentroids
 from servant_core.recognisers.linear_head import LinearHeadAnswers
@@ -218,11 +223,7 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
     ) -> Self:
         """Learn the places of windows `X`; `visits` (any labels) say which visit each window
         comes from (module docstring, 8); None: every place is one visit."""
-        check_training_scenes(scenes, len(X))
-        if visits is not None and len(visits) != len(X):
-            raise ValueError(f"{len(X)} feature rows but {len(visits)} visit labels")
-        if not self.temperature > 0:
-            raise ValueError(f"temperature must be above 0, not {self.temperature!r}")
+        self._check_fit(X, scenes, visits)
         if not self.encoding_weight >= 0:
             raise ValueError(f"encoding_weight must be 0 or above, not {self.encoding_weight!r}")
         X = np.asarray(X, dtype=np.float32)
@@ -248,9 +249,7 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         D = np.vstack([self.describe(part) for part in parts]).astype(np.float64)
         # A codeword almost no training frame comes near has next to no spread; unfloored, a new
         # place that does come near it would sit thousands of spreads away on that one column.
-        spread = D.std(axis=0)
-        self.descriptor_mean_ = D.mean(axis=0)
-        self.descriptor_scale_ = np.maximum(spread, SCALE_FLOOR * np.median(spread) + 1e-12)
+        self._fit_scale(D)
         self.train_descriptors_ = self._standardise(D)
         self.background_descriptors_ = self._background_descriptors()
         copies = len(D) // len(X)
@@ -261,14 +260,34 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         self._fit_heads()
         return self
 
-    def _background_descriptors(self) -> np.ndarray:
-        """The universal background through this model's codebooks (empty without one: the
-        parameter is off, no background file, or it was made with another featurizer)."""
-        found = (
-            load_background(self.background_params(), self.background_exclude, self.background_path)
-            if self.background
-            else None
+    def _check_fit(
+        self, X: np.ndarray, scenes: Sequence[str] | np.ndarray, visits: Any | None
+    ) -> None:
+        check_training_scenes(scenes, len(X))
+        if visits is not None and len(visits) != len(X):
+            raise ValueError(f"{len(X)} feature rows but {len(visits)} visit labels")
+        if not self.temperature > 0:
+            raise ValueError(f"temperature must be above 0, not {self.temperature!r}")
+
+    def _fit_scale(self, D: np.ndarray) -> None:
+        """Each descriptor column's mean and spread over `D`, the spread floored."""
+        spread = D.std(axis=0)
+        self.descriptor_mean_ = D.mean(axis=0)
+        self.descriptor_scale_ = np.maximum(spread, SCALE_FLOOR * np.median(spread) + 1e-12)
+
+    def _background(self) -> Background | None:
+        """This featurizer's windows of the universal background, without the recordings in
+        `background_exclude` (None: the parameter is off, no background file, or it was made
+        with another featurizer)."""
+        if not self.background:
+            return None
+        return load_background(
+            self.background_params(), self.background_exclude, self.background_path
         )
+
+    def _background_descriptors(self) -> np.ndarray:
+        """The universal background through this model's codebooks (empty without one)."""
+        found = self._background()
         if found is None or not len(found.frames):
             return np.empty((0, self.train_descriptors_.shape[1]))
         return self._standardise(self.describe(found.frames).astype(np.float64))
