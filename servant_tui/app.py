@@ -27,6 +27,7 @@ from servant_core.events import (
     UnknownScene,
     VisualPrediction,
 )
+from servant_core.fusion.elsewhere import LIKELIER_UNIT
 from servant_core.storage import data_dir
 from servant_tui.heap import release_free_heap
 from servant_tui.messages import EngineEvent, SensorUpdate, SpectrumUpdate, TrainingDone
@@ -71,7 +72,10 @@ HEAP_TRIM_EVERY_S = 60.0
 def log_confidence(event: Any) -> str:
     """A confidence for the log, its unit bound to its number: the log wraps at spaces, and
     "(67.5" at the end of one row with "%)" alone on the next reads badly."""
-    return confidence_text(event.confidence, event.confidence_unit).replace(" %", "%")
+    text = confidence_text(event.confidence, event.confidence_unit).replace(" %", "%")
+    if event.confidence_unit == LIKELIER_UNIT:  # "1.8 × average": one word to the log
+        text = text.replace(" ", "\u00a0")
+    return text
 
 
 class ServantApp(App[None]):

@@ -131,3 +131,55 @@ def test_a_place_labelled_later_is_folded_in(two_places) -> None:
     grown = copy.deepcopy(model).fold_in(site[:6], ["site"] * 6)
     assert "site" in grown.scenes_
     assert np.mean(open_predict(grown, site[6:]) == "site") >= 0.8
+
+
+@pytest.fixture(scope="module")
+def office_and_a_conversation(shared_data):
+    """An office, a café and a street taught (six windows each), the office's later windows, and
+    a conversation recorded elsewhere (never taught), which the head alone hears as the office."""
+    dev = shared_data / "audio" / "dev"
+    model = make_recogniser("audio", "birdnet")
+    office = model.featurize(windows_of(dev / "office/dusktide-cast-office.mp3", model.rate)[:16])
+    cafe = model.featurize(windows_of(dev / "cafe/audio-ambient-cafe.mp3", model.rate)[:6])
+    street = model.featurize(windows_of(dev / "street/audio-ambient-city.mp3", model.rate)[:6])
+    talk = windows_of(dev / "crowd/loco-sound-v2-conversation.mp3", model.rate)
+    X = np.concatenate([office[:6], cafe, street])
+    model.fit(X, ["office"] * 6 + ["cafe"] * 6 + ["street"] * 6)
+    return model, X, office[6:], model.featurize(talk)
+
+
+@pytest.mark.slow
+def test_a_conversation_elsewhere_is_not_the_office_it_sounds_like(
+    office_and_a_conversation,
+) -> None:
+    model, _, later_office, talk = office_and_a_conversation
+    assert model.accept_cosine is not None
+    office = model.scenes_.index("office")
+    # the head alone: the conversation is the office, and more than half sure of it
+    assert np.mean(model.open_proba(talk)[:, office] >= 0.5) >= 0.6
+    assert np.mean(model.predict(talk) == "office") >= 0.6  # which taught place: unchanged
+    # nothing the office was taught on is like it: somewhere else, for the engine and the arm
+    assert np.mean(open_predict(model, talk) == UNKNOWN) >= 0.7
+    names, _, _ = model.answers(talk)
+    np.testing.assert_array_equal(names, open_predict(model, talk))
+    # the office's own later minutes still are the office
+    assert np.mean(open_predict(model, later_office) == "office") >= 0.9
+
+
+@pytest.mark.slow
+def test_a_taught_window_is_always_like_itself_and_old_models_have_no_check(
+    office_and_a_conversation,
+) -> None:
+    model, X, _, talk = office_and_a_conversation
+    assert not model._unlike_taught(model.descriptors(X), model.predict(X)).any()
+    header, arrays = model.get_state()
+    assert header["params"]["accept_cosine"] == model.accept_cosine
+    del header["params"]["accept_cosine"]  # a model file saved before the check
+    old = BirdnetAcousticRecogniser.from_state(header, arrays)
+    assert old.accept_cosine is None
+    unchecked = copy.deepcopy(model)
+    unchecked.accept_cosine = None
+    np.testing.assert_array_equal(open_predict(old, talk), open_predict(unchecked, talk))
+    assert np.mean(open_predict(old, talk) == "office") > np.mean(
+        open_predict(model, talk) == "office"
+    )

@@ -200,3 +200,13 @@ def test_predict_says_an_unknown_place_at_a_building_site(shared_data, tmp_path)
     result = servant("predict", str(model), "--audio", str(cafe), "--json")
     said = json.loads(result.stdout)["acoustic"]
     assert np.mean([w["scene"] == "cafe" and w["confidence"] >= 50 for w in said]) >= 0.9
+    # a picture beside that sound: not a share of two places ("50 %" for a coin toss) but how
+    # much likelier it makes its place than the average taught place, as the live engine shows
+    picture = sorted((shared_data / "images/dev/cafe").glob("*.jpg"))[20]
+    result = servant("predict", str(model), "--audio", str(cafe), "--image", str(picture))
+    assert result.returncode == 0, result.stderr
+    seen = [line for line in result.stdout.splitlines() if line.startswith("Visual")]
+    assert len(seen) == 1 and "× average)" in seen[0] and "%" not in seen[0], result.stdout
+    result = servant("predict", str(model), "--image", str(picture), "--json")
+    (visual,) = json.loads(result.stdout)["visual"]
+    assert visual["confidence_unit"] == "× average" and 0.0 <= visual["confidence"] <= 2.0

@@ -35,7 +35,7 @@ from servant_core.evaluate import (
 from servant_core.event_text import confidence_text, place
 from servant_core.features.rows import checked_rows, usable_rows
 from servant_core.fusion import FusionConfig, LearnedFusion
-from servant_core.fusion.elsewhere import place_probability
+from servant_core.fusion.elsewhere import place_probability, shown
 from servant_core.library import (
     SceneLibrary,
     featurize_recordings,
@@ -260,14 +260,21 @@ def cmd_predict(args: argparse.Namespace) -> int:
         visual = _role(model, "visual", args.model)
         X = checked_rows(visual.featurize([read_picture(p) for p in args.image]), "pictures")
         visual_predictions = said_of(visual, X)
-        unit = visual.confidence_unit
+        # as the live engine shows them: beside a sound that knows elsewhere, not as shares
+        closed_beside_open = knows_elsewhere(model.get("acoustic")) and not knows_elsewhere(visual)
+        figures = [
+            shown(
+                None if s == UNKNOWN else s, c, visual.confidence_unit, p or {}, closed_beside_open
+            )
+            for s, c, p in visual_predictions
+        ]
         result["visual"] = [
             {"picture": str(p), "scene": s, "confidence": c, "confidence_unit": unit}
-            for p, (s, c, _) in zip(args.image, visual_predictions, strict=True)
+            for p, (s, _, _), (c, unit) in zip(args.image, visual_predictions, figures, strict=True)
         ]
         lines += [
             f"Visual {p.name}: {_judged(s, c, unit)}"
-            for p, (s, c, _) in zip(args.image, visual_predictions, strict=True)
+            for p, (s, _, _), (c, unit) in zip(args.image, visual_predictions, figures, strict=True)
         ]
     if first_acoustic is not None and visual_predictions:
         config = _fusion_config(args)

@@ -72,7 +72,7 @@ from servant_core.fusion import (
     ParallelFusion,
     SequentialFusion,
 )
-from servant_core.fusion.elsewhere import elsewhere_mass, place_probability, steady_open
+from servant_core.fusion.elsewhere import elsewhere_mass, place_probability, shown, steady_open
 from servant_core.fusion.smoothing import SceneSmoother
 from servant_core.library import SceneLibrary
 from servant_core.recognisers import FRESH_METHODS, UNKNOWN, Recogniser
@@ -118,7 +118,7 @@ class Engine:
       odd window does not flip the scene (recognisers in percent that know no elsewhere; None:
       each window alone). It starts afresh whenever the acoustic recogniser changes. A sound
       recogniser that knows elsewhere is held steady by `steady_open` instead (two windows in a
-      row name a place).
+      row name a place; a place named stays while two windows give it half on average).
     - `ask_after_s`: "What is this place?" (`UnknownScene` for the sound) once the sound has
       named no taught place for this long; its label is for all those windows (one recording
       of them in the library, each window learned).
@@ -228,6 +228,7 @@ class Engine:
         # the last window's probabilities, where the sound knows somewhere else
         self._previous_window: dict[str, float] | None = None
         self._previous_far = False  # the last window was far from every taught place
+        self._named_before: str | None = None  # the place the last window named, if any
         self._silent = False  # the last window was silence (its notice was given)
         # the predictions whose last window was skipped as unusable: told once, not each window
         self._skipping: set[str] = set()
@@ -435,7 +436,10 @@ class Engine:
             with self._lock:
                 previous, self._previous_window = self._previous_window, scores
                 far_before, self._previous_far = self._previous_far, far
-            named, scores = steady_open(scores, previous or {}, far and far_before)
+                named_before = self._named_before
+            named, scores = steady_open(scores, previous or {}, far and far_before, named_before)
+            with self._lock:
+                self._named_before = named
             scene = UNKNOWN if named is None else named
             confidence = 100.0 * scores[named] if named else 0.0
         elif self.smoother is not None and unit == "%":
@@ -511,8 +515,8 @@ class Engine:
         with self._lock:
             self._scores[SENSES[sense].role] = scores
             self._note_open(SENSES[sense].role, recogniser)
-        unit = recogniser.confidence_unit
-        self._emit(SensePrediction(t, sense, scene if known else None, confidence, scores, unit))
+        shown, unit = self._shown(scene if known else None, confidence, scores, recogniser)
+        self._emit(SensePrediction(t, sense, scene if known else None, shown, scores, unit))
         if not known and not self._named_elsewhere(sense, t):
             self._ask_label(Kept(sense, rows, int(getattr(recogniser, "rate", rate))), scores, t)
         with self._lock:
@@ -535,7 +539,17 @@ class Engine:
             self.smoother.reset()
         self._previous_window = None
         self._previous_far = False
+        self._named_before = None
         self._unknown_windows.clear()
+
+    def _shown(
+        self, scene: str | None, confidence: float, scores: dict[str, float], recogniser: Any
+    ) -> tuple[float, str | None]:
+        """The figure and unit a sense's prediction is shown with (`fusion.elsewhere.shown`)."""
+        with self._lock:
+            sound_open = "acoustic" in self._open_roles
+        closed_beside_open = sound_open and not knows_elsewhere(recogniser)
+        return shown(scene, confidence, recogniser.confidence_unit, scores, closed_beside_open)
 
     def _note_open(self, role: str, recogniser: Recogniser) -> None:
         """Remember whether a role's probabilities leave room for somewhere else (under _lock)."""
@@ -594,8 +608,8 @@ class Engine:
             self._scores["visual"] = scores
             self._note_open("visual", visual)
             events = self._judged("image", scene if known else None, confidence, t, scores)
-        unit = visual.confidence_unit
-        self._emit(VisualPrediction(t, scene if known else None, confidence, scores, unit))
+        shown, unit = self._shown(scene if known else None, confidence, scores, visual)
+        self._emit(VisualPrediction(t, scene if known else None, shown, scores, unit))
         # The decision (and the arm's move) first; the palette is only for show.
         self._handle(events)
         matched = visual.matched_palette(X)[0] if hasattr(visual, "matched_palette") else None

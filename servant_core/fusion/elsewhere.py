@@ -20,6 +20,34 @@ from __future__ import annotations
 
 from collections.abc import Collection, Mapping, Sequence
 
+# The unit of a closed sense's figure beside a sound that knows somewhere else (`likelier`)
+LIKELIER_UNIT = "× average"
+
+
+def likelier(scene: str, shares: Mapping[str, float]) -> float:
+    """How many times likelier a closed sense's shares among the taught places make `scene`
+    than the average taught place (K·q above): 1.0 says nothing either way, as a coin toss
+    between two places does, which as a share reads "50 %" (pure)."""
+    return len(shares) * shares.get(scene, 0.0)
+
+
+def shown(
+    scene: str | None,
+    confidence: float,
+    unit: str | None,
+    shares: Mapping[str, float],
+    closed_beside_open: bool,
+) -> tuple[float, str | None]:
+    """The figure and unit a sense's prediction is shown with (the log, the Scene pane,
+    `servant run --headless`, `servant predict`). A closed sense's share among the taught
+    places (pictures, motion, ambient) beside a sound that knows somewhere else
+    (`closed_beside_open`) is shown as how much likelier it makes its place than the average
+    taught place (`likelier`, what it weighs in the decision): as a share, two places taught
+    made every picture "50 %", which reads as a confidence the decision never had (pure)."""
+    if scene is None or unit != "%" or not closed_beside_open:
+        return confidence, unit
+    return likelier(scene, shares), LIKELIER_UNIT
+
 
 def elsewhere_mass(scores: Mapping[str, float]) -> float:
     """What an open sense's probabilities leave for somewhere else (pure)."""
@@ -56,15 +84,30 @@ def place_probability(
 
 
 def steady_open(
-    window: Mapping[str, float], previous: Mapping[str, float], far: bool
+    window: Mapping[str, float],
+    previous: Mapping[str, float],
+    far: bool,
+    named_before: str | None = None,
 ) -> tuple[str | None, dict[str, float]]:
-    """What a sense that knows somewhere else says of a window, held steady: each taught place
-    gets the smaller of its probability in this window and in the one before, so a place is
-    named only when two windows in a row say so: neither one odd window nor the last place,
-    lingering in the first window of the next, can name a place alone (pure). Returns (the
-    place, or None where somewhere else keeps half the probability or more, or the window is
-    `far` from every taught place; the held probabilities)."""
+    """What a sense that knows somewhere else says of a window, held steady (pure).
+
+    - Arriving: each taught place gets the smaller of its probability in this window and in the
+      one before, so a place is named only when two windows in a row say so: neither one odd
+      window nor the last place, lingering in the first window of the next, can name a place
+      alone.
+    - Staying: the place named at the window before (`named_before`) stays named while it is
+      still this window's likeliest and the two windows give it half or more on average: one
+      odd window at a place the wearer is in (a door, a voice close by) does not unname it for
+      two windows (on bench/wearer_day.py, taught places' right moves 0.838 → 0.86 with five
+      places: docs/research.md, issue 21). Its held probability is that average.
+
+    Returns (the place, or None where somewhere else keeps half the probability or more, or the
+    window is `far` from every taught place; the held probabilities)."""
     scores = {s: min(window.get(s, 0.0), previous.get(s, 0.0)) for s in window}
-    if far or not scores or elsewhere_mass(scores) >= 0.5:
+    if far or not scores:
+        return None, scores
+    if named_before in window and max(window, key=lambda s: window[s]) == named_before:
+        scores[named_before] = (window[named_before] + previous.get(named_before, 0.0)) / 2
+    if elsewhere_mass(scores) >= 0.5:
         return None, scores
     return max(scores, key=lambda s: scores[s]), scores

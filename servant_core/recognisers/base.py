@@ -184,9 +184,14 @@ def open_probabilities(recogniser: Any, X: np.ndarray) -> np.ndarray:
 
 def open_predict(recogniser: Any, X: np.ndarray) -> np.ndarray:
     """`predict`, and `UNKNOWN` too where the recogniser knows somewhere else and gives it half
-    the probability or more: the wearer is more likely in a place not taught than in any taught.
-    What the live engine, `servant predict` and the arm go by; `predict` alone says which taught
-    place a row is likeliest (what the evaluation protocols score)."""
+    the probability or more (the wearer is more likely in a place not taught than in any taught)
+    or, where it has one, its acceptance check says the row is unlike what its place was taught
+    on (`birdnet`'s nearest taught window). What the live engine, `servant predict` and the
+    arm go by; `predict` alone says which taught place a row is likeliest (what the evaluation
+    protocols score)."""
+    at_once = getattr(recogniser, "answers", None)
+    if at_once is not None:  # its own open names, acceptance checks and all
+        return np.asarray(at_once(X)[0]).astype(str)
     names = np.asarray(recogniser.predict(X)).astype(object)
     if knows_elsewhere(recogniser):
         names = elsewhere_unnamed(names, open_probabilities(recogniser, X))

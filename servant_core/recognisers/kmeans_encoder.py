@@ -146,6 +146,8 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
     background_path: ClassVar[Path] = BACKGROUND_PATH
     # the featurizer parameters a background file must share with the model to be used
     background_keys: ClassVar[tuple[str, ...]] = FRAME_KEYS
+    # the nearest-taught-window check of `_unlike_taught` (None: none; `birdnet` has one)
+    accept_cosine: float | None = None
 
     def __init__(
         self,
@@ -414,6 +416,23 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
     @property
     def knows_elsewhere(self) -> bool:
         return len(self.elsewhere_coef_) > 0
+
+    def _unlike_taught(self, D: np.ndarray, names: np.ndarray) -> np.ndarray:
+        """(n,) bool: rows whose nearest window of their named place, as taught (not the
+        equalised copies), is at a cosine below `accept_cosine` in the standardised space: a
+        place is only this window's if the wearer was taught something like it there. None:
+        no such check (`kmeans-encoder`, whose centroids are its distance check)."""
+        unlike = np.zeros(len(D), dtype=bool)
+        if self.accept_cosine is None:
+            return unlike
+        rows = D / (np.linalg.norm(D, axis=1, keepdims=True) + 1e-12)
+        heard = ~self.train_derived_
+        for place in set(np.asarray(names).tolist()) & set(self.classes_):
+            taught = self.train_descriptors_[heard & (self.train_scenes_ == place)]
+            taught = taught / (np.linalg.norm(taught, axis=1, keepdims=True) + 1e-12)
+            here = np.asarray(names) == place
+            unlike[here] = np.max(rows[here] @ taught.T, axis=1) < self.accept_cosine
+        return unlike
 
     def _open_proba(self, D: np.ndarray) -> np.ndarray:
         """(n, scenes): the probability of each taught place and not somewhere else; the rest

@@ -74,7 +74,13 @@ class LinearHeadAnswers:
         names = self._names(D)
         if self.knows_elsewhere:
             names = elsewhere_unnamed(names, open_p)
+            names[self._unlike_taught(D, names)] = UNKNOWN
         return names.astype(str), 100.0 * np.max(open_p, axis=1), open_p
+
+    def _unlike_taught(self, D: np.ndarray, names: np.ndarray) -> np.ndarray:
+        """(n,) bool: rows unlike every row their named place was taught on (a recogniser's
+        own acceptance check; none by default)."""
+        return np.zeros(len(D), dtype=bool)
 
     def confidence(self, X: np.ndarray) -> np.ndarray:
         """The probability of the likeliest taught place and not somewhere else, in percent."""
