@@ -73,8 +73,8 @@ def log_confidence(event: Any) -> str:
     """A confidence for the log, its unit bound to its number: the log wraps at spaces, and
     "(67.5" at the end of one row with "%)" alone on the next reads badly."""
     text = confidence_text(event.confidence, event.confidence_unit).replace(" %", "%")
-    if event.confidence_unit == LIKELIER_UNIT:  # "1.8 × average": one word to the log
-        text = text.replace(" ", "\u00a0")
+    if event.confidence_unit == LIKELIER_UNIT:  # "1.8× average": the number keeps its ×
+        text = text.replace(" ×", "×")
     return text
 
 
