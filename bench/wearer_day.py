@@ -4,7 +4,7 @@ For each library size (2, 3 and 5 places) and each draw, places are drawn among 
 have both recordings and pictures in `../shared/data`; each is taught as teach mode does: the
 first `--shots` windows (5 s each; teach mode asks for six, `TEACH_WINDOWS`) of one of its
 recordings and `--pictures` of its pictures.
-The recognisers are Servant's defaults (`kmeans-encoder`, `fisher-bovw`), fitted as a retrain
+The recognisers are Servant's defaults (`birdnet`, `fisher-bovw`), fitted as a retrain
 fits them. Then the wearer walks through stays of `--stay` seconds, in a random order:
 
 - taught, same microphone: later windows of the taught recordings, with other pictures of the
