@@ -515,8 +515,8 @@ class Engine:
         with self._lock:
             self._scores[SENSES[sense].role] = scores
             self._note_open(SENSES[sense].role, recogniser)
-        shown, unit = self._shown(scene if known else None, confidence, scores, recogniser)
-        self._emit(SensePrediction(t, sense, scene if known else None, shown, scores, unit))
+        figure, unit = self._shown(scene if known else None, confidence, scores, recogniser)
+        self._emit(SensePrediction(t, sense, scene if known else None, figure, scores, unit))
         if not known and not self._named_elsewhere(sense, t):
             self._ask_label(Kept(sense, rows, int(getattr(recogniser, "rate", rate))), scores, t)
         with self._lock:
@@ -608,8 +608,8 @@ class Engine:
             self._scores["visual"] = scores
             self._note_open("visual", visual)
             events = self._judged("image", scene if known else None, confidence, t, scores)
-        shown, unit = self._shown(scene if known else None, confidence, scores, visual)
-        self._emit(VisualPrediction(t, scene if known else None, shown, scores, unit))
+        figure, unit = self._shown(scene if known else None, confidence, scores, visual)
+        self._emit(VisualPrediction(t, scene if known else None, figure, scores, unit))
         # The decision (and the arm's move) first; the palette is only for show.
         self._handle(events)
         matched = visual.matched_palette(X)[0] if hasattr(visual, "matched_palette") else None

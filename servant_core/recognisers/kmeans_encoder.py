@@ -429,6 +429,8 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         heard = ~self.train_derived_
         for place in set(np.asarray(names).tolist()) & set(self.classes_):
             taught = self.train_descriptors_[heard & (self.train_scenes_ == place)]
+            if not len(taught):  # only equalised copies of it: nothing heard to compare with
+                continue
             taught = taught / (np.linalg.norm(taught, axis=1, keepdims=True) + 1e-12)
             here = np.asarray(names) == place
             unlike[here] = np.max(rows[here] @ taught.T, axis=1) < self.accept_cosine
