@@ -37,10 +37,14 @@ def main() -> int:
             time.sleep(args.seconds)
             used, elapsed = cpu_seconds(pid) - start_cpu, time.monotonic() - start
             peak = rss_mb(pid, "VmHWM")
+            # of what it holds at the end: its own (anonymous) memory, and pages mapped from
+            # files (libraries, BirdNET's weights), which the kernel can drop and processes share
+            anonymous, mapped = rss_mb(pid, "RssAnon"), rss_mb(pid, "RssFile")
     share = 100 * used / elapsed
     print(f"servant demo in tmux 160x48 over {elapsed:.0f} s (after {args.warmup:g} s warm-up)")
     print(f"  CPU:         {share:5.1f} % of one core   (target <= 30 %)")
     print(f"  peak memory: {peak:5.0f} MB             (target <= 250 MB)")
+    print(f"  at the end:  {anonymous:5.0f} MB its own, {mapped:.0f} MB mapped from files")
     return 0
 
 

@@ -71,8 +71,8 @@ def model_path() -> Path:
 
 
 class Embedder:
-    """A thin class around the BirdNET interpreter: a window's two crops (2, 144000) → their
-    embeddings (2, 1024). One interpreter a process, behind a lock (an interpreter is not safe
+    """A thin class around the BirdNET interpreter: a window's crops (k, 144000) → their
+    embeddings (k, 1024). One interpreter a process, behind a lock (an interpreter is not safe
     across threads: the senses' thread and a retrain both featurize).
 
     The interpreter runs without its default (XNNPACK) delegate: the delegate keeps the pooling
@@ -96,7 +96,9 @@ class Embedder:
         self.input = self.interpreter.get_input_details()[0]["index"]
         # the pooling layer is the tensor just before the species' output
         self.pooled = self.interpreter.get_output_details()[0]["index"] - 1
-        self.interpreter.resize_tensor_input(self.input, [2, CROP_SAMPLES])
+        # one crop at a time: the same embeddings and speed as both at once, with half the
+        # interpreter's working memory (20 MB rather than 41 MB; docs/engine.md)
+        self.interpreter.resize_tensor_input(self.input, [1, CROP_SAMPLES])
         self.interpreter.allocate_tensors()
         self.lock = threading.Lock()
 
@@ -108,10 +110,13 @@ class Embedder:
             return cls._shared
 
     def __call__(self, crops: np.ndarray) -> np.ndarray:
+        embedded = []
         with self.lock:
-            self.interpreter.set_tensor(self.input, np.ascontiguousarray(crops, np.float32))
-            self.interpreter.invoke()
-            return np.array(self.interpreter.get_tensor(self.pooled), dtype=np.float32)
+            for crop in np.asarray(crops, dtype=np.float32):
+                self.interpreter.set_tensor(self.input, np.ascontiguousarray(crop[None]))
+                self.interpreter.invoke()
+                embedded.append(np.array(self.interpreter.get_tensor(self.pooled)[0]))
+        return np.stack(embedded).astype(np.float32)
 
 
 def crops_of(windows: np.ndarray) -> np.ndarray:
@@ -168,8 +173,11 @@ class BirdnetAcousticRecogniser(KMeansEncoderAcousticRecogniser):
         if not len(windows):
             return np.empty((0, EMBEDDING_SIZE), dtype=np.float32)
         embed = Embedder.shared()
-        heard = np.stack([resample(w, int(self.rate), BIRDNET_RATE) for w in windows])
-        return np.stack([embed(pair).mean(axis=0) for pair in crops_of(heard)])
+        embedded = np.empty((len(windows), EMBEDDING_SIZE), dtype=np.float32)
+        for i, window in enumerate(windows):  # one at a time: no copy of them all at 48 kHz
+            heard = resample(window, int(self.rate), BIRDNET_RATE)
+            embedded[i] = embed(crops_of(heard[None])[0]).mean(axis=0)
+        return embedded
 
     def fit(
         self,
