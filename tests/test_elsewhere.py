@@ -12,7 +12,7 @@ from servant_core.audio import read_audio
 from servant_core.capture.replay import Clip, PacedAudio
 from servant_core.capture.source import ManualClock
 from servant_core.engine import Engine
-from servant_core.events import AcousticPrediction, UnknownScene, VisualPrediction
+from servant_core.events import AcousticPrediction, Decision, UnknownScene, VisualPrediction
 from servant_core.fusion.elsewhere import elsewhere_mass, place_probability, steady_open
 from servant_core.modelfile import load_model, save_model
 from servant_core.recognisers import UNKNOWN, make_recogniser
@@ -278,3 +278,36 @@ def test_beside_a_sound_that_knows_elsewhere_a_picture_shows_how_much_likelier_n
     # the sound's own figure is still the probability of the place and not elsewhere
     heard = [e for e in events if isinstance(e, AcousticPrediction) and e.scene]
     assert heard and {e.confidence_unit for e in heard} == {"%"}
+
+
+def test_a_decision_from_pictures_alone_is_none_where_the_sound_says_elsewhere() -> None:
+    """A learned net knows only the taught places: sure of its pictures, it may name the café
+    from café pictures alone (it leaned on the pictures only). Where the sound, which knows
+    somewhere else, says the wearer is elsewhere, the engine makes that "No scene detected",
+    as the parallel policy decides; the arm is not asked. Where the sound agrees, the café."""
+    clock = ManualClock()
+    rate = 16000
+    engine = Engine(
+        audio=PacedAudio(
+            [Clip(None, np.zeros(rate, np.float32))], rate, realtime=False, clock=clock
+        ),
+        clock=clock,
+    )
+    events: list = []
+    engine.subscribe(events.append)
+    moves: list = []
+    engine._arm.act = lambda scene, *args: moves.append(scene)  # what the arm is asked (spy)
+    engine._open_roles = {"acoustic"}
+    pictures = {"cafe": 0.9, "street": 0.1}
+    from_pictures = Decision(10.0, "cafe", 90.0, "CafeScene detected", leaned_on=("image",))
+    engine._scores = {"acoustic": {"cafe": 0.03, "street": 0.02}, "visual": pictures}
+    engine._handle([from_pictures])
+    [none] = [e for e in events if isinstance(e, Decision)]
+    assert none.scene is None and none.line == "No scene detected" and none.leaned_on == ("image",)
+    assert moves == []
+    engine._scores = {"acoustic": {"cafe": 0.8, "street": 0.05}, "visual": pictures}
+    engine._handle([from_pictures])
+    cafe = [e for e in events if isinstance(e, Decision)][-1]
+    # by hand: cafe 0.8·(2·0.9) = 1.44, street 0.05·(2·0.1) = 0.01, elsewhere 0.15 → 1.44 / 1.6
+    assert cafe.scene == "cafe" and cafe.not_elsewhere and moves == ["cafe"]
+    assert cafe.confidence == pytest.approx(100 * 1.44 / 1.6)

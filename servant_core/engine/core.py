@@ -73,6 +73,8 @@ from servant_core.fusion import (
     SequentialFusion,
 )
 from servant_core.fusion.elsewhere import elsewhere_mass, place_probability, shown, steady_open
+from servant_core.fusion.parallel import OPEN_DECIDE_AT
+from servant_core.fusion.sequential import scene_line
 from servant_core.fusion.smoothing import SceneSmoother
 from servant_core.library import SceneLibrary
 from servant_core.recognisers import FRESH_METHODS, UNKNOWN, Recogniser
@@ -629,11 +631,21 @@ class Engine:
                 unit = decision_unit(self.acoustic, self.visual)
                 open_roles = set(self._open_roles)
             event = dataclasses.replace(event, confidence_unit=unit)
-            if open_roles & set(roles) and not event.not_elsewhere:
+            # a sense that knows somewhere else and has spoken has its say, leaned on or not:
+            # pictures alone (a learned net's choice) cannot tell a taught place from elsewhere
+            heard_open = sorted(r for r in open_roles if self.latest_scores().get(r))
+            if heard_open and not event.not_elsewhere:
+                roles = tuple(dict.fromkeys([*roles, *heard_open]))
                 # the figure the log, the Scene pane and the arm's threshold share: the
                 # probability of this place and not somewhere else, from every sense
                 sure = place_probability(scene, self.latest_scores(), roles, open_roles)
                 event = dataclasses.replace(event, confidence=100.0 * sure, not_elsewhere=True)
+                if sure < OPEN_DECIDE_AT:
+                    # likelier somewhere else: no place, as the parallel policy decides (a
+                    # learned net, which knows only the taught places, or the paper's rule)
+                    none = dataclasses.replace(event, scene=None, line=scene_line(None))
+                    self._emit(dataclasses.replace(none, confidence=0.0, not_elsewhere=False))
+                    continue
             self._emit(event)
             self._arm.act(
                 scene,
