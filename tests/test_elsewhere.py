@@ -233,6 +233,7 @@ def test_beside_a_sound_that_knows_elsewhere_a_picture_shows_how_much_likelier_n
     pictures know only the taught places; beside a sound that knows somewhere else they show
     how much likelier they make their place than the average taught place, in the events the
     log, the Scene pane and `servant run --headless` print."""
+    from servant_core.fusion import ParallelFusion
     from servant_core.fusion.elsewhere import LIKELIER_UNIT
     from servant_core.library import read_picture
     from servant_tui.app import ServantApp
@@ -260,10 +261,14 @@ def test_beside_a_sound_that_knows_elsewhere_a_picture_shows_how_much_likelier_n
         acoustic=model,
         visual=visual,
         clock=clock,
+        fusion=ParallelFusion(),  # the live policy: it looks from the start
         spectrum_fps=0,
     )
     events: list = []
     engine.subscribe(events.append)
+    engine.run_until(4.0)  # pictures before the sound's first window: shown the same way
+    early = [e for e in events if isinstance(e, VisualPrediction) and e.scene]
+    assert early and not any(isinstance(e, AcousticPrediction) for e in events)
     engine.run_until(31.0)
     engine.stop()
     seen = [e for e in events if isinstance(e, VisualPrediction) and e.scene]

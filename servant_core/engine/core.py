@@ -548,8 +548,9 @@ class Engine:
         self, scene: str | None, confidence: float, scores: dict[str, float], recogniser: Any
     ) -> tuple[float, str | None]:
         """The figure and unit a sense's prediction is shown with (`fusion.elsewhere.shown`)."""
-        with self._lock:
-            sound_open = "acoustic" in self._open_roles
+        with self._lock:  # the sound's model, not its last window: from the first picture on
+            acoustic = self.acoustic
+        sound_open = acoustic is not None and knows_elsewhere(acoustic)
         closed_beside_open = sound_open and not knows_elsewhere(recogniser)
         return shown(scene, confidence, recogniser.confidence_unit, scores, closed_beside_open)
 
