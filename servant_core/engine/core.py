@@ -634,12 +634,13 @@ class Engine:
             event = dataclasses.replace(event, confidence_unit=unit)
             # a sense that knows somewhere else and has spoken has its say, leaned on or not:
             # pictures alone (a learned net's choice) cannot tell a taught place from elsewhere
-            heard_open = sorted(r for r in open_roles if self.latest_scores().get(r))
+            latest = self.latest_scores()  # one snapshot for the figure and the arm alike
+            heard_open = sorted(r for r in open_roles if latest.get(r))
             if heard_open and not event.not_elsewhere:
                 roles = tuple(dict.fromkeys([*roles, *heard_open]))
                 # the figure the log, the Scene pane and the arm's threshold share: the
                 # probability of this place and not somewhere else, from every sense
-                sure = place_probability(scene, self.latest_scores(), roles, open_roles)
+                sure = place_probability(scene, latest, roles, open_roles)
                 event = dataclasses.replace(event, confidence=100.0 * sure, not_elsewhere=True)
                 if sure < OPEN_DECIDE_AT:
                     # likelier somewhere else: no place, as the parallel policy decides (a
@@ -650,7 +651,7 @@ class Engine:
             self._emit(event)
             self._arm.act(
                 scene,
-                self.latest_scores(),
+                latest,
                 self.confidence_threshold,
                 roles,
                 open_roles,

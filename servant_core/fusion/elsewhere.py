@@ -20,6 +20,8 @@ from __future__ import annotations
 
 from collections.abc import Collection, Mapping, Sequence
 
+from servant_core.recognisers.base import PERCENT
+
 # The unit of a closed sense's figure beside a sound that knows somewhere else (`likelier`)
 LIKELIER_UNIT = "× average"
 
@@ -44,7 +46,7 @@ def shown(
     (`closed_beside_open`) is shown as how much likelier it makes its place than the average
     taught place (`likelier`, what it weighs in the decision): as a share, two places taught
     made every picture "50 %", which reads as a confidence the decision never had (pure)."""
-    if scene is None or unit != "%" or not closed_beside_open:
+    if scene is None or unit != PERCENT or not closed_beside_open:
         return confidence, unit
     return likelier(scene, shares), LIKELIER_UNIT
 
