@@ -22,8 +22,8 @@ def test_a_decision_that_knows_elsewhere_says_so() -> None:
 
 def test_at_an_untaught_place_the_pane_says_so_and_the_last_decision_is_history() -> None:
     """Walked on from the café to a building site: once "What is this place?" is asked, the
-    Scene pane no longer shows the café as what was decided, until the sound names a taught
-    place again."""
+    Scene pane no longer shows the café as what was decided; once the sound names a taught place
+    again it is deciding, the café still history, until the next decision."""
     pane = ScenePane()
     cafe = Decision(5.0, "cafe", 81.0, "CafeScene detected", 90.0, 50.0, "%", not_elsewhere=True)
     pane.show_event(cafe)
@@ -40,4 +40,12 @@ def test_at_an_untaught_place_the_pane_says_so_and_the_last_decision_is_history(
 
     pane.show_event(AcousticPrediction(65.0, "street", 70.0, confidence_unit="%"))
     rows = [(key, str(text)) for key, _, text in pane._rows()]
-    assert ("decided", "CafeScene detected") in rows
+    assert ("decided", "deciding…") in rows
+    assert ("decided", "CafeScene detected") not in rows
+    assert any(key == "history" and text.startswith("cafe") for key, text in rows)
+
+    street = Decision(70.0, "street", 75.0, "StreetScene detected", 80.0, 70.0, "%")
+    pane.show_event(street)
+    rows = [(key, str(text)) for key, _, text in pane._rows()]
+    assert ("decided", "StreetScene detected") in rows
+    assert [text[:6] for key, text in rows if key == "history"] == ["cafe  "]

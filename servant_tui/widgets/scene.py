@@ -87,6 +87,9 @@ class ScenePane(Static):
         # "What is this place?" asked since the last decision: the wearer is somewhere untaught,
         # so the last decision is history, not where the wearer is
         self.asked: UnknownScene | None = None
+        # the question was answered (the sense names a taught place again) and nothing has been
+        # decided since: the last decision was made before the wearer left, so it stays history
+        self.deciding = False
 
     def on_mount(self) -> None:
         self.update(self._render_state(), layout=False)
@@ -97,6 +100,7 @@ class ScenePane(Static):
     def show_event(self, event: object) -> None:
         if self.asked is not None and answers_question(event, self.asked.sense):
             self.asked = None
+            self.deciding = True
         if isinstance(event, AcousticPrediction):
             self.heard = event
         elif isinstance(event, VisualPrediction):
@@ -107,6 +111,7 @@ class ScenePane(Static):
             self.fusion = event
         elif isinstance(event, Decision):
             self.decisions.appendleft(event)
+            self.deciding = False
         elif isinstance(event, UnknownScene):
             self.asked = event
         else:
@@ -145,8 +150,11 @@ class ScenePane(Static):
             rows.append(("decided", "decided", Text(UNKNOWN_PLACE, "magenta")))
             rows.append(("average", "", Text("asked what it is", "magenta")))
             history = list(self.decisions)
-        elif last is None:
-            rows.append(("decided", "decided", Text("nothing yet", "grey50")))
+        elif last is None or self.deciding:
+            rows.append(
+                ("decided", "decided", Text("deciding…" if last else "nothing yet", "grey50"))
+            )
+            history = list(self.decisions)
         else:
             style = "bold green" if last.scene else "yellow"
             rows.append(("decided", "decided", Text(last.line, style)))
