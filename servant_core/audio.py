@@ -134,11 +134,19 @@ def _not_readable(path: Path, reason: str) -> ServantError:
     return ServantError(f"{path}: not a readable audio file ({reason}); use WAV, FLAC, OGG or MP3")
 
 
+def _reason(exc: Exception) -> str:
+    """What went wrong, in one line: libsndfile's own words, without the file object's repr
+    (`Error opening <…_ErrorsKept object at 0x7f…>: Format not recognised.`) its str adds."""
+    if isinstance(exc, sf.LibsndfileError):
+        return exc.error_string.rstrip(".")
+    return first_line(exc)
+
+
 def _checked_info(path: Path, handle: Any) -> Any:
     try:
         info = sf.info(handle)
     except (sf.LibsndfileError, RuntimeError, ValueError, TypeError) as exc:
-        raise _not_readable(path, first_line(exc)) from None
+        raise _not_readable(path, _reason(exc)) from None
     if not MIN_RATE <= info.samplerate <= MAX_RATE:
         raise ServantError(
             f"{path}: sample rate {info.samplerate} Hz is outside {MIN_RATE}–{MAX_RATE} Hz "
@@ -189,7 +197,7 @@ def _decode_mono(path: Path, handle: Any, info: Any) -> np.ndarray:
                     beyond.append(samples[fits:])
                 decoded += len(samples)
     except (sf.LibsndfileError, RuntimeError, ValueError, TypeError, OSError) as exc:
-        raise _not_readable(path, first_line(exc)) from None
+        raise _not_readable(path, _reason(exc)) from None
     if decoded == 0:
         raise ServantError(f"{path}: the audio file is empty; record it again")
     if damaged == decoded:
