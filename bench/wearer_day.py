@@ -67,10 +67,12 @@ from servant_core.capture.source import ManualClock  # noqa: E402
 from servant_core.cli import library_noise_silenced  # noqa: E402
 from servant_core.engine.core import Engine  # noqa: E402
 from servant_core.engine.factories import live_policy, steady  # noqa: E402
+from servant_core.errors import ServantError  # noqa: E402
 from servant_core.events import UnknownScene  # noqa: E402
 from servant_core.fusion.sequential import FusionConfig  # noqa: E402
 from servant_core.library import TEACH_WINDOWS, read_picture  # noqa: E402
 from servant_core.recognisers import FRESH_METHODS, make_recogniser  # noqa: E402
+from servant_core.senses import AUDIO_SUFFIXES, PICTURE_SUFFIXES  # noqa: E402
 from servant_core.settings import Settings  # noqa: E402
 from servant_tui.app import PROMPT_EVERY_S  # noqa: E402  (how often the app asks)
 
@@ -140,20 +142,42 @@ class Data:
         samples = int(rate * WINDOW_S)
         self.recordings: dict[str, list[tuple[str, np.ndarray]]] = defaultdict(list)
         for path in sorted((root / "audio" / "dev").glob("*/*")):
-            audio = read_audio(path, rate)
+            if path.suffix.lower() not in AUDIO_SUFFIXES:
+                continue
+            try:
+                audio = read_audio(path, rate)
+            except ServantError as error:  # another library may hold a damaged file: not this one
+                print(f"  left out: {error}")
+                continue
             n = min(len(audio) // samples, max_windows)
             if n >= 2:
                 windows = audio[: n * samples].reshape(n, samples)
                 self.recordings[path.parent.name].append((path.name, windows))
-        self.pictures = {
-            folder.name: sorted(folder.glob("*.jpg"))
+        pictures = {
+            folder.name: sorted(p for p in folder.iterdir() if p.suffix.lower() in PICTURE_SUFFIXES)
             for folder in sorted((root / "images" / "dev").iterdir())
+            if folder.is_dir()
         }
+        self.pictures = {scene: paths for scene, paths in pictures.items() if paths}
         self.both = sorted(
             s
             for s in self.pictures
             if len([r for r in self.recordings.get(s, []) if not in_background(r[0])]) >= 1
         )
+
+
+def cannot_draw(data: Data, n_places: int, pictures: int) -> str | None:
+    """Why a library of `n_places` cannot be drawn from `data` (None: it can): another library
+    than ../shared may have fewer scenes with both sound and pictures, or none left untaught to
+    show at untaught places."""
+    if len(data.both) < n_places:
+        return f"only {len(data.both)} scenes have both recordings and pictures"
+    if len(data.pictures) <= n_places:
+        return "no picture scene would be left untaught to show at untaught places"
+    few = [s for s in data.both if len(data.pictures[s]) <= pictures]
+    if few:
+        return f"{', '.join(few)}: not more than {pictures} pictures, none left to walk with"
+    return None
 
 
 def in_background(name: str) -> bool:
@@ -461,6 +485,10 @@ def main() -> int:
     )
     figures = {}
     for size in [int(s) for s in args.sizes.split(",")]:
+        why = cannot_draw(data, size, args.pictures)
+        if why:
+            print(f"{size} places taught: left out, {why}")
+            continue
         runs = []
         for draw in range(args.draws):
             plan = plan_walk(data, size, args, np.random.default_rng([size, draw]))
