@@ -49,6 +49,27 @@ def test_somewhere_else_is_not_made_a_taught_place_by_the_pictures() -> None:
     assert place_probability("cafe", scores, ("acoustic", "visual"), {"acoustic"}) < 0.05
 
 
+def test_a_place_labelled_from_its_sound_alone_is_not_ruled_out_by_pictures_never_taught_it() -> (
+    None
+):
+    """A building site labelled when "What is this place?" was asked has sound and no picture:
+    the pictures, taught the café and the street only, say nothing of it (before, their share of
+    it, none, made every decision there "No scene detected" at 0.0)."""
+    sound = {"cafe": 0.01, "street": 0.01, "site": 0.95}
+    roles, open_roles = ("acoustic", "visual"), {"acoustic"}
+    for visual in ({"cafe": 0.5, "street": 0.5}, {"cafe": 0.1, "street": 0.9}):
+        sure = place_probability("site", {"acoustic": sound, "visual": visual}, roles, open_roles)
+        # by hand, with a picture of the street: site 0.95, street 0.01·1.8, cafe 0.01·0.2,
+        # elsewhere 0.03
+        assert sure > 0.9
+    assert (
+        place_probability(
+            "street", {"acoustic": sound, "visual": {"cafe": 0.1, "street": 0.9}}, roles, open_roles
+        )
+        < 0.05
+    )
+
+
 def test_with_no_sense_knowing_elsewhere_the_least_sure_share_stands() -> None:
     scores = {"acoustic": {"cafe": 0.8, "street": 0.2}, "visual": {"cafe": 0.6, "street": 0.4}}
     assert place_probability("cafe", scores, ("acoustic", "visual"), set()) == pytest.approx(0.6)

@@ -12,8 +12,9 @@ Bayes product with the senses independent given the place:
 
 where K·q_k(s) is a closed sense's likelihood ratio of s against the average taught place. A
 closed sense that cannot tell the places apart (two places, a picture at 50 %) is K·q = 1: it
-changes nothing, rather than making every picture "50 % sure". With no open sense at all the old
-rule stands: the least sure sense's share.
+changes nothing, rather than making every picture "50 % sure"; nor does one that was never taught
+the place at all (a place labelled from its sound alone). With no open sense at all the old rule
+stands: the least sure sense's share.
 """
 
 from __future__ import annotations
@@ -80,7 +81,9 @@ def place_probability(
         else:
             n = len(probabilities)
             for place in places:
-                weight[place] *= n * probabilities.get(place, 0.0)
+                # a place this sense was never taught (labelled from its sound alone: no picture
+                # of it) is one it has no evidence about, for or against
+                weight[place] *= n * probabilities[place] if place in probabilities else 1.0
     total = sum(weight.values()) + weight_elsewhere
     return weight.get(scene, 0.0) / total if total > 0 else 0.0
 
