@@ -28,7 +28,15 @@ from sklearn.metrics import confusion_matrix
 from servant_core.choices import DEFAULT_SHOTS, EVAL_PROTOCOLS, IMAGE_TRAIN_FRACTION
 from servant_core.errors import ServantError
 from servant_core.events import Decision
-from servant_core.fusion import POLICIES, FusionConfig, FusionNet, LearnedFusion, scene_line
+from servant_core.fusion import (
+    POLICIES,
+    FusionConfig,
+    FusionNet,
+    LearnedFusion,
+    ParallelFusion,
+    scene_line,
+)
+from servant_core.fusion.elsewhere import elsewhere_mass
 from servant_core.fusion.learned import SenseOpinions
 from servant_core.fusion.learning import (
     DEFAULT_FOLDS,
@@ -645,11 +653,21 @@ SENSES = ("audio", "image")
 
 
 def _tell(policy: Any, sense: str, said: Said, t: float) -> list[Any]:
-    """Give a policy one opinion: with its scores to a policy that takes any sense (`on_sense`),
-    as the scene and confidence to a rule policy."""
+    """Give a policy one opinion: with its scores to a policy that takes any sense (`on_sense`)
+    and to the parallel policy where the sound knows somewhere else (opinions with scores, as
+    `servant predict` gives them then), as the scene and confidence to a rule policy."""
     scene, confidence, scores = said
     if hasattr(policy, "on_sense"):
         return list(policy.on_sense(sense, scene, confidence, t, scores))
+    if isinstance(policy, ParallelFusion) and scores is not None:
+        # a sound that knows somewhere else, with its probabilities: the pictures are evidence,
+        # not votes, as in the live engine (`Engine._judged`)
+        if sense == "audio":
+            elsewhere = elsewhere_mass(scores)
+            return list(
+                policy.on_acoustic(scene, confidence, t, scores=scores, elsewhere=elsewhere)
+            )
+        return list(policy.on_visual(scene, confidence, t, scores=scores))
     tell = policy.on_acoustic if sense == "audio" else policy.on_visual
     return list(tell(scene, confidence, t))
 

@@ -34,7 +34,7 @@ from servant_core.evaluate import (
 )
 from servant_core.event_text import confidence_text, place
 from servant_core.features.rows import checked_rows, usable_rows
-from servant_core.fusion import FusionConfig, LearnedFusion
+from servant_core.fusion import FusionConfig, LearnedFusion, ParallelFusion
 from servant_core.fusion.elsewhere import place_probability, shown
 from servant_core.library import (
     SceneLibrary,
@@ -282,13 +282,22 @@ def cmd_predict(args: argparse.Namespace) -> int:
             # the net saved with the model by `train --learned-fusion`; without one, the fallback
             policy = LearnedFusion(config, fusion)
             decision = run_encounter(policy, config, first_acoustic, visual_predictions)
+        elif args.policy == "parallel" and knows_elsewhere(model.get("acoustic")):
+            # as the live engine decides: on the probability of the sound's place and not
+            # elsewhere, the pictures as evidence (a picture never taught a place the sound
+            # names says nothing of it), not on the pictures' votes
+            decision = run_encounter(
+                ParallelFusion(config), config, first_acoustic, visual_predictions
+            )
         else:
             decision = run_fusion(
                 args.policy, config, first_acoustic[:2], [v[:2] for v in visual_predictions]
             )
         shared = decision_unit(model.get("acoustic"), model.get("visual"))
         said = "average confidence"
-        if decision.scene is not None and knows_elsewhere(model.get("acoustic")):
+        if decision.not_elsewhere:
+            said = "sure it is here and not elsewhere"
+        elif decision.scene is not None and knows_elsewhere(model.get("acoustic")):
             # as the live engine and the arm: this place and not somewhere else, both senses
             scores = {
                 "acoustic": first_acoustic[2] or {},
