@@ -70,6 +70,32 @@ def test_a_place_labelled_from_its_sound_alone_is_not_ruled_out_by_pictures_neve
     )
 
 
+def test_a_decision_likelier_elsewhere_is_no_decision_one_here_gets_its_probability() -> None:
+    """What the live engine and `servant predict` make of a decision a policy knowing only the
+    taught places reached (a learned net leaning on café pictures)."""
+    from servant_core.events import Decision
+    from servant_core.fusion.elsewhere import open_decision
+
+    cafe = Decision(30.0, "cafe", 97.0, "CafeScene detected", 0.0, 97.0, "%", leaned_on=("image",))
+    pictures = {"cafe": 0.97, "street": 0.03}
+    roles, open_roles = ("acoustic", "visual"), {"acoustic"}
+    site = {"acoustic": {"cafe": 0.02, "street": 0.01}, "visual": pictures}
+    none = open_decision(cafe, site, roles, open_roles)
+    assert (none.scene, none.line, none.confidence, none.not_elsewhere) == (
+        None,
+        "No scene detected",
+        0.0,
+        False,
+    )
+    here = {"acoustic": {"cafe": 0.6, "street": 0.1}, "visual": pictures}
+    decided = open_decision(cafe, here, roles, open_roles)
+    assert decided.scene == "cafe" and decided.not_elsewhere
+    assert decided.confidence == pytest.approx(
+        100 * place_probability("cafe", here, roles, open_roles)
+    )
+    assert decided.leaned_on == ("image",)
+
+
 def test_with_no_sense_knowing_elsewhere_the_least_sure_share_stands() -> None:
     scores = {"acoustic": {"cafe": 0.8, "street": 0.2}, "visual": {"cafe": 0.6, "street": 0.4}}
     assert place_probability("cafe", scores, ("acoustic", "visual"), set()) == pytest.approx(0.6)

@@ -6,7 +6,6 @@ this module is imported when one of the commands runs."""
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from collections import Counter
 from pathlib import Path
@@ -35,7 +34,7 @@ from servant_core.evaluate import (
 from servant_core.event_text import confidence_text, place
 from servant_core.features.rows import checked_rows, usable_rows
 from servant_core.fusion import FusionConfig, LearnedFusion, ParallelFusion
-from servant_core.fusion.elsewhere import place_probability, shown
+from servant_core.fusion.elsewhere import open_decision, shown
 from servant_core.library import (
     SceneLibrary,
     featurize_recordings,
@@ -298,14 +297,15 @@ def cmd_predict(args: argparse.Namespace) -> int:
         if decision.not_elsewhere:
             said = "sure it is here and not elsewhere"
         elif decision.scene is not None and knows_elsewhere(model.get("acoustic")):
-            # as the live engine and the arm: this place and not somewhere else, both senses
+            # as the live engine and the arm: this place and not somewhere else, both senses;
+            # likelier somewhere else, no place (a learned net leaning on the pictures)
             scores = {
                 "acoustic": first_acoustic[2] or {},
                 "visual": visual_predictions[-1][2] or {},
             }
-            sure = place_probability(decision.scene, scores, ("acoustic", "visual"), {"acoustic"})
-            decision = dataclasses.replace(decision, confidence=100.0 * sure)
-            said = "sure it is here and not elsewhere"
+            decision = open_decision(decision, scores, ("acoustic", "visual"), {"acoustic"})
+            if decision.scene is not None:
+                said = "sure it is here and not elsewhere"
         result["decision"] = {
             "scene": decision.scene,
             "line": decision.line,

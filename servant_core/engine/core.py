@@ -72,9 +72,7 @@ from servant_core.fusion import (
     ParallelFusion,
     SequentialFusion,
 )
-from servant_core.fusion.elsewhere import elsewhere_mass, place_probability, shown, steady_open
-from servant_core.fusion.parallel import OPEN_DECIDE_AT
-from servant_core.fusion.sequential import scene_line
+from servant_core.fusion.elsewhere import elsewhere_mass, open_decision, shown, steady_open
 from servant_core.fusion.smoothing import SceneSmoother
 from servant_core.library import SceneLibrary
 from servant_core.recognisers import FRESH_METHODS, UNKNOWN, Recogniser
@@ -639,14 +637,12 @@ class Engine:
             if heard_open and not event.not_elsewhere:
                 roles = tuple(dict.fromkeys([*roles, *heard_open]))
                 # the figure the log, the Scene pane and the arm's threshold share: the
-                # probability of this place and not somewhere else, from every sense
-                sure = place_probability(scene, latest, roles, open_roles)
-                event = dataclasses.replace(event, confidence=100.0 * sure, not_elsewhere=True)
-                if sure < OPEN_DECIDE_AT:
-                    # likelier somewhere else: no place, as the parallel policy decides (a
-                    # learned net, which knows only the taught places, or the paper's rule)
-                    none = dataclasses.replace(event, scene=None, line=scene_line(None))
-                    self._emit(dataclasses.replace(none, confidence=0.0, not_elsewhere=False))
+                # probability of this place and not somewhere else, from every sense; likelier
+                # somewhere else, no place (a learned net, which knows only the taught places,
+                # or the paper's rule)
+                event = open_decision(event, latest, roles, open_roles)
+                if event.scene is None:
+                    self._emit(event)
                     continue
             self._emit(event)
             self._arm.act(

@@ -19,9 +19,15 @@ stands: the least sure sense's share.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Collection, Mapping, Sequence
 
+from servant_core.events import Decision
+from servant_core.fusion.sequential import scene_line
 from servant_core.recognisers.base import PERCENT
+
+# A place is decided when it is likelier than not that the wearer is there and not elsewhere.
+OPEN_DECIDE_AT = 0.5
 
 # The unit of a closed sense's figure beside a sound that knows somewhere else (`likelier`)
 LIKELIER_UNIT = "× average"
@@ -86,6 +92,26 @@ def place_probability(
                 weight[place] *= n * probabilities[place] if place in probabilities else 1.0
     total = sum(weight.values()) + weight_elsewhere
     return weight.get(scene, 0.0) / total if total > 0 else 0.0
+
+
+def open_decision(
+    decision: Decision,
+    scores: Mapping[str, Mapping[str, float]],
+    senses: Sequence[str],
+    open_senses: Collection[str],
+) -> Decision:
+    """A decision of a place, its figure made the probability of that place and not somewhere
+    else from `senses` (`place_probability`); one likelier somewhere else (under
+    `OPEN_DECIDE_AT`) is no decision, as the parallel policy decides: what the live engine and
+    `servant predict` make of a decision a policy that knows only the taught places reached (a
+    learned net leaning on pictures, the paper's rule) (pure)."""
+    sure = place_probability(str(decision.scene), scores, senses, open_senses)
+    if sure < OPEN_DECIDE_AT:
+        nothing = scene_line(None)
+        return dataclasses.replace(
+            decision, scene=None, line=nothing, confidence=0.0, not_elsewhere=False
+        )
+    return dataclasses.replace(decision, confidence=100.0 * sure, not_elsewhere=True)
 
 
 def steady_open(

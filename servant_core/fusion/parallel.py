@@ -26,12 +26,9 @@ from collections import Counter
 from collections.abc import Mapping
 
 from servant_core.events import Decision, FusionState
-from servant_core.fusion.elsewhere import place_probability
+from servant_core.fusion.elsewhere import OPEN_DECIDE_AT, place_probability
 from servant_core.fusion.sequential import AcousticWindow, FusionConfig, scene_line
 from servant_core.recognisers.base import UNKNOWN
-
-# A place is decided when it is likelier than not that the wearer is there and not elsewhere.
-OPEN_DECIDE_AT = 0.5
 
 
 class ParallelFusion(AcousticWindow):
