@@ -36,7 +36,6 @@ from servant_core.fusion import (
     ParallelFusion,
     scene_line,
 )
-from servant_core.fusion.elsewhere import elsewhere_mass
 from servant_core.fusion.learned import SenseOpinions
 from servant_core.fusion.learning import (
     DEFAULT_FOLDS,
@@ -662,12 +661,8 @@ def _tell(policy: Any, sense: str, said: Said, t: float) -> list[Any]:
     if isinstance(policy, ParallelFusion) and scores is not None:
         # a sound that knows somewhere else, with its probabilities: the pictures are evidence,
         # not votes, as in the live engine (`Engine._judged`)
-        if sense == "audio":
-            elsewhere = elsewhere_mass(scores)
-            return list(
-                policy.on_acoustic(scene, confidence, t, scores=scores, elsewhere=elsewhere)
-            )
-        return list(policy.on_visual(scene, confidence, t, scores=scores))
+        tell_open = policy.on_acoustic if sense == "audio" else policy.on_visual
+        return list(tell_open(scene, confidence, t, scores=scores))
     tell = policy.on_acoustic if sense == "audio" else policy.on_visual
     return list(tell(scene, confidence, t))
 

@@ -282,29 +282,20 @@ def test_beside_a_sound_that_knows_elsewhere_a_picture_shows_how_much_likelier_n
     log, the Scene pane and `servant run --headless` print."""
     from servant_core.fusion import ParallelFusion
     from servant_core.fusion.elsewhere import LIKELIER_UNIT
-    from servant_core.library import read_picture
     from servant_tui.app import ServantApp
     from servant_tui.widgets.scene import ScenePane
-    from tests.test_engine import ShowingCamera
+    from tests.test_engine import cafe_and_street_pictures
 
     model, _, _ = two_places
     rate = model.rate
-    images = shared_data / "images" / "dev"
-    taught = {s: sorted((images / s).glob("*.jpg"))[:4] for s in ("cafe", "street")}
-    visual = make_recogniser("image", "fisher-bovw")
-    visual.fit(
-        visual.featurize([read_picture(p) for s in taught for p in taught[s]]),
-        [s for s in taught for _ in taught[s]],
-    )
-    shown = [read_picture(p) for p in sorted((images / "cafe").glob("*.jpg"))[10:14]]
-    shots = iter(range(10**6))
+    visual, camera = cafe_and_street_pictures(shared_data, "cafe")
     cafe = read_audio(shared_data / "audio/dev/cafe/audio-ambient-cafe.mp3", rate)
     clock = ManualClock()
     engine = Engine(
         audio=PacedAudio(
             [Clip(None, cafe[15 * rate : 45 * rate])], rate, realtime=False, clock=clock
         ),
-        camera=ShowingCamera(lambda: shown[next(shots) % len(shown)]),
+        camera=camera,
         acoustic=model,
         visual=visual,
         clock=clock,

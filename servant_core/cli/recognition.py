@@ -34,7 +34,7 @@ from servant_core.evaluate import (
 from servant_core.event_text import confidence_text, place
 from servant_core.features.rows import checked_rows, usable_rows
 from servant_core.fusion import FusionConfig, LearnedFusion, ParallelFusion
-from servant_core.fusion.elsewhere import open_decision, shown
+from servant_core.fusion.elsewhere import beside_open_sound, open_decision, shown
 from servant_core.library import (
     SceneLibrary,
     featurize_recordings,
@@ -260,7 +260,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
         X = checked_rows(visual.featurize([read_picture(p) for p in args.image]), "pictures")
         visual_predictions = said_of(visual, X)
         # as the live engine shows them: beside a sound that knows elsewhere, not as shares
-        closed_beside_open = knows_elsewhere(model.get("acoustic")) and not knows_elsewhere(visual)
+        closed_beside_open = beside_open_sound(model.get("acoustic"), visual)
         figures = [
             shown(
                 None if s == UNKNOWN else s, c, visual.confidence_unit, p or {}, closed_beside_open
@@ -293,10 +293,8 @@ def cmd_predict(args: argparse.Namespace) -> int:
                 args.policy, config, first_acoustic[:2], [v[:2] for v in visual_predictions]
             )
         shared = decision_unit(model.get("acoustic"), model.get("visual"))
-        said = "average confidence"
-        if decision.not_elsewhere:
-            said = "sure it is here and not elsewhere"
-        elif decision.scene is not None and knows_elsewhere(model.get("acoustic")):
+        open_sound = knows_elsewhere(model.get("acoustic"))
+        if decision.scene is not None and open_sound and not decision.not_elsewhere:
             # as the live engine and the arm: this place and not somewhere else, both senses;
             # likelier somewhere else, no place (a learned net leaning on the pictures)
             scores = {
@@ -304,8 +302,9 @@ def cmd_predict(args: argparse.Namespace) -> int:
                 "visual": visual_predictions[-1][2] or {},
             }
             decision = open_decision(decision, scores, ("acoustic", "visual"), {"acoustic"})
-            if decision.scene is not None:
-                said = "sure it is here and not elsewhere"
+        said = (
+            "sure it is here and not elsewhere" if decision.not_elsewhere else "average confidence"
+        )
         result["decision"] = {
             "scene": decision.scene,
             "line": decision.line,

@@ -72,7 +72,7 @@ from servant_core.fusion import (
     ParallelFusion,
     SequentialFusion,
 )
-from servant_core.fusion.elsewhere import elsewhere_mass, open_decision, shown, steady_open
+from servant_core.fusion.elsewhere import beside_open_sound, open_decision, shown, steady_open
 from servant_core.fusion.smoothing import SceneSmoother
 from servant_core.library import SceneLibrary
 from servant_core.recognisers import FRESH_METHODS, UNKNOWN, Recogniser
@@ -491,10 +491,7 @@ class Engine:
         if isinstance(self.fusion, ParallelFusion):
             # the pictures are evidence, not votes, once the sound knows somewhere else
             if sense == "audio" and "acoustic" in self._open_roles:
-                elsewhere = elsewhere_mass(scores)
-                return self.fusion.on_acoustic(
-                    scene, confidence, t, scores=scores, elsewhere=elsewhere
-                )
+                return self.fusion.on_acoustic(scene, confidence, t, scores=scores)
             if sense == "image":
                 return self.fusion.on_visual(scene, confidence, t, scores=scores)
         if sense == "audio":
@@ -548,9 +545,8 @@ class Engine:
         """The figure and unit a sense's prediction is shown with (`fusion.elsewhere.shown`)."""
         with self._lock:  # the sound's model, not its last window: from the first picture on
             acoustic = self.acoustic
-        sound_open = acoustic is not None and knows_elsewhere(acoustic)
-        closed_beside_open = sound_open and not knows_elsewhere(recogniser)
-        return shown(scene, confidence, recogniser.confidence_unit, scores, closed_beside_open)
+        beside = beside_open_sound(acoustic, recogniser)
+        return shown(scene, confidence, recogniser.confidence_unit, scores, beside)
 
     def _note_open(self, role: str, recogniser: Recogniser) -> None:
         """Remember whether a role's probabilities leave room for somewhere else (under _lock)."""

@@ -21,10 +21,11 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Collection, Mapping, Sequence
+from typing import Any
 
 from servant_core.events import Decision
 from servant_core.fusion.sequential import scene_line
-from servant_core.recognisers.base import PERCENT
+from servant_core.recognisers.base import PERCENT, knows_elsewhere
 
 # A place is decided when it is likelier than not that the wearer is there and not elsewhere.
 OPEN_DECIDE_AT = 0.5
@@ -38,6 +39,12 @@ def likelier(scene: str, shares: Mapping[str, float]) -> float:
     than the average taught place (K·q above): 1.0 says nothing either way, as a coin toss
     between two places does, which as a share reads "50 %" (pure)."""
     return len(shares) * shares.get(scene, 0.0)
+
+
+def beside_open_sound(acoustic: Any, recogniser: Any) -> bool:
+    """Whether a sense's recogniser knows only the taught places while the sound's (`acoustic`,
+    None: no sound) knows somewhere else: its shares are then shown as `likelier`."""
+    return acoustic is not None and knows_elsewhere(acoustic) and not knows_elsewhere(recogniser)
 
 
 def shown(
@@ -107,9 +114,8 @@ def open_decision(
     learned net leaning on pictures, the paper's rule) (pure)."""
     sure = place_probability(str(decision.scene), scores, senses, open_senses)
     if sure < OPEN_DECIDE_AT:
-        nothing = scene_line(None)
         return dataclasses.replace(
-            decision, scene=None, line=nothing, confidence=0.0, not_elsewhere=False
+            decision, scene=None, line=scene_line(None), confidence=0.0, not_elsewhere=False
         )
     return dataclasses.replace(decision, confidence=100.0 * sure, not_elsewhere=True)
 

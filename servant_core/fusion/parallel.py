@@ -11,13 +11,14 @@ fusion_latency.py). If nothing agrees within `acoustic_window_s` of the first ac
 prediction, it says `No scene detected`, forgets, and goes on, as the paper's policy does.
 
 When the sound knows somewhere else (its recogniser learned a background: the engine passes its
-probabilities with `scores=` and what they leave with `elsewhere=`), the pictures are evidence
-rather than votes: the scene is decided once, with at least `votes_needed` pictures of the last
-`confirm_window_s` seen, the probability that the wearer is in it and not somewhere else, from
-the sound and those pictures' average shares (`fusion.elsewhere.place_probability`), reaches
-`OPEN_DECIDE_AT`. Pictures that cannot tell the taught places apart (two places, every picture
-50 %) then neither block a place the sound is sure of nor confirm one it is not; the decision's
-confidence is that probability, which the arm's threshold reads too.
+probabilities of the taught places with `scores=`; what they leave is somewhere else's), the
+pictures are evidence rather than votes: the scene is decided once, with at least `votes_needed`
+pictures of the last `confirm_window_s` seen, the probability that the wearer is in it and not
+somewhere else, from the sound and those pictures' average shares
+(`fusion.elsewhere.place_probability`), reaches `OPEN_DECIDE_AT`. Pictures that cannot tell the
+taught places apart (two places, every picture 50 %) then neither block a place the sound is sure
+of nor confirm one it is not; the decision's confidence is that probability, which the arm's
+threshold reads too.
 """
 
 from __future__ import annotations
@@ -136,16 +137,15 @@ class ParallelFusion(AcousticWindow):
         t: float,
         *,
         scores: Mapping[str, float] | None = None,
-        elsewhere: float | None = None,
     ) -> list[Decision | FusionState]:
-        """The latest window's opinion; `scores` and `elsewhere` when the sound knows somewhere
-        else (its probabilities of the taught places, and what they leave)."""
+        """The latest window's opinion; `scores` only when the sound knows somewhere else (its
+        probabilities of the taught places and not elsewhere)."""
         events = self.tick(t)
         if scene is None or scene == UNKNOWN:
             self.scene, self.acoustic_confidence = None, 0.0
             return [*events, self.state(t)]
         self.scene, self.acoustic_confidence = scene, float(confidence)
-        self.sound_scores = dict(scores) if scores is not None and elsewhere is not None else None
+        self.sound_scores = dict(scores) if scores is not None else None
         if self.opened_at is None:
             self.opened_at = t
         return [*events, *self._decide(t)]
