@@ -34,7 +34,9 @@ from servant_core.senses import ROLE_SENSE
 from servant_core.storage import (
     atomic_save_npz,
     check_replaceable,
+    file_stamp,
     is_servant_npz_of,
+    numbered_backup,
     open_regular_file,
     os_reason,
 )
@@ -110,6 +112,32 @@ def save_model(
             f"{path}: cannot save the model ({os_reason(exc)}); the previous file is unchanged, "
             "choose another place"
         ) from None
+
+
+def replace_model(
+    path: Path,
+    recognisers: dict[str, Recogniser],
+    fusion: FusionNet | None,
+    stamp: tuple[int, int, int] | None,
+) -> Path | None:
+    """`save_model` for a run that began when `path` had `stamp` (`file_stamp`): refused when
+    another writer (a second `servant train`, the app's retrain) changed it since, so that the
+    last one does not silently win; the model replaced is kept as a numbered backup, returned."""
+    if file_stamp(path) != stamp:
+        raise ServantError(
+            f"{path}: was written by someone else while this training ran (another `servant "
+            "train`, or the app's retrain); it is left as they wrote it: train again, or give "
+            "-o FILE"
+        )
+    try:
+        backup = numbered_backup(path)
+    except OSError as exc:
+        raise ServantError(
+            f"{path}: cannot keep a backup of the model there ({os_reason(exc)}); the previous "
+            "file is unchanged, give -o FILE"
+        ) from None
+    save_model(path, recognisers, fusion)
+    return backup
 
 
 def check_model_output(path: str | Path) -> Path:

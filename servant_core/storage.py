@@ -72,6 +72,38 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
     return path
 
 
+def file_stamp(path: str | os.PathLike[str]) -> tuple[int, int, int] | None:
+    """What changes when a file is replaced or rewritten (inode, size, modification time in ns);
+    None when there is no such file. Two stamps that differ: someone wrote it in between."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return (st.st_ino, st.st_size, st.st_mtime_ns)
+
+
+def numbered_backup(path: str | os.PathLike[str]) -> Path | None:
+    """Keep the file at `path` as `STEM.N.SUFFIX` beside it (N the first number free), before it
+    is replaced; None when there is no file. A hard link where the file system has them (instant,
+    and `path` is never missing), else an atomic copy."""
+    path = Path(path)
+    if not path.is_file():
+        return None
+    for n in range(1, 10_000):
+        backup = path.with_name(f"{path.stem}.{n}{path.suffix}")
+        if backup.exists() or backup.is_symlink():
+            continue
+        try:
+            os.link(path, backup)
+        except FileExistsError:
+            continue
+        except OSError:
+            atomic_write_bytes(backup, path.read_bytes())
+        _sync_directory(path.parent)
+        return backup
+    raise ServantError(f"{path}: 9,999 backups of it already; move some away")
+
+
 # A write takes seconds at most; a temporary this old was left by a process killed mid-write.
 STALE_TEMPORARY_SECONDS = 3600.0
 

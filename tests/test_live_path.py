@@ -25,9 +25,11 @@ from servant_core.cli import main as cli_main
 from servant_core.cli.live import _event_line, build_run_engine, live_settings
 from servant_core.demo.audio_synth import DEMO_RATE
 from servant_core.demo.scenes import synth_picture, synth_window, write_demo_library
+from servant_core.errors import ServantError
 from servant_core.engine import NO_MODEL, build_demo_engine
 from servant_core.events import ArmState, Decision, Notice
 from servant_core.fusion import FusionConfig
+from servant_core.modelfile import load_model
 from servant_core.servo.emulator import start_emulator
 from servant_core.settings import Settings, default_joints, save_settings
 from servant_tui.main import build_parser
@@ -443,6 +445,46 @@ def test_train_without_output_writes_the_model_that_servant_run_loads(tmp_path):
         settings = live_settings(args)
         assert settings.model is not None and Path(settings.model).is_file()
         assert settings.model == settings.model_path
+
+
+def test_train_never_replaces_the_taught_model_without_being_told(tmp_path, capsys):
+    """Issue 39 item 1: `servant train LIBRARY` silently replaced the model taught in the app.
+    Now it refuses, naming --force and -o; with --force the old model is kept as a backup that
+    still loads, and a model written meanwhile by someone else is never overwritten."""
+    library = tmp_path / "library"
+    write_demo_library(library, seed=3)
+    assert cli_main(["train", str(library), "--audio-method", "codebook"]) == 0
+    model = live_settings(None).model_path
+    taught = model.read_bytes()
+    capsys.readouterr()
+    assert cli_main(["train", str(library), "--audio-method", "codebook"]) == 2
+    err = capsys.readouterr().err
+    assert "not replaced" in err and "--force" in err and "-o FILE" in err, err
+    assert model.read_bytes() == taught and load_model(model)
+    assert cli_main(["train", str(library), "--audio-method", "codebook", "--force"]) == 0
+    out = capsys.readouterr().out
+    backup = model.with_name("model.1.npz")
+    assert f"kept as {backup}" in out and out.count("\n") >= 1, out
+    assert backup.read_bytes() == taught and load_model(backup) and load_model(model)
+
+
+def test_a_model_written_during_a_training_is_not_overwritten(tmp_path):
+    """Issue 41 item 4: of two trainings of one model file, the last silently won."""
+    from servant_core.modelfile import replace_model
+    from servant_core.storage import file_stamp
+
+    library = tmp_path / "library"
+    write_demo_library(library, seed=3)
+    out = tmp_path / "model.npz"
+    assert cli_main(["train", str(library), "--audio-method", "codebook", "-o", str(out)]) == 0
+    recognisers = load_model(out)
+    stamp = file_stamp(out)
+    replace_model(out, recognisers, None, stamp)  # nobody wrote in between: replaced, kept
+    assert out.with_name("model.1.npz").is_file()
+    other = out.read_bytes()
+    with pytest.raises(ServantError, match="someone else while this training ran"):
+        replace_model(out, recognisers, None, stamp)
+    assert out.read_bytes() == other and not out.with_name("model.2.npz").exists()
 
 
 def test_settings_in_the_demo_show_the_emulated_arms_port():

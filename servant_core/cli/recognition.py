@@ -42,7 +42,7 @@ from servant_core.library import (
     read_pictures,
     visits_of,
 )
-from servant_core.modelfile import check_model_output, load_model_and_fusion, save_model
+from servant_core.modelfile import check_model_output, load_model_and_fusion, replace_model
 from servant_core.progress import Progress
 from servant_core.recognisers import (
     UNKNOWN,
@@ -59,7 +59,7 @@ from servant_core.recognisers.base import (
     open_probabilities,
 )
 from servant_core.senses import ROLE_SENSE, SAMPLE_SENSES
-from servant_core.storage import default_model_file
+from servant_core.storage import default_model_file, file_stamp
 
 
 def _fusion_config(args: argparse.Namespace) -> FusionConfig:
@@ -86,8 +86,14 @@ def _audio_params(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    if args.output is not None:
-        check_model_output(args.output)  # before the work, not after it
+    output = check_model_output(args.output or default_model_file())  # before the work
+    if args.output is None and output.exists() and not args.force:
+        raise ServantError(
+            f"{output}: holds the model `servant` loads (what teach mode and earlier trainings "
+            "taught); not replaced. Give -o FILE to train into another file, or --force to "
+            "replace it (the old one is kept beside it as a numbered backup)"
+        )
+    stamp = file_stamp(output)
     library = SceneLibrary.scan(args.root)
     on_error = _warn if args.skip_bad else None
     recognisers: dict[str, Recogniser] = {}
@@ -160,10 +166,12 @@ def cmd_train(args: argparse.Namespace) -> int:
             if fusion is not None
             else {"fallback": reason}
         )
-    output = args.output or default_model_file()
-    save_model(output, recognisers, fusion)
+    backup = replace_model(output, recognisers, fusion, stamp)
     summary["model"] = str(output)
+    summary["backup"] = None if backup is None else str(backup)
     lines = [f"model written to {output}"]
+    if backup is not None:
+        lines[0] += f"; the model it replaced is kept as {backup}"
     for role in ("acoustic", "visual", *SAMPLE_SENSES):
         if role in SAMPLE_SENSES and role in summary:
             s = summary[role]

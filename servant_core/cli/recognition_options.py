@@ -36,6 +36,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="model file (default: the data dir's model.npz, which `servant` and `servant run` "
         "load at start)",
     )
+    train.add_argument(
+        "--force",
+        action="store_true",
+        help="replace the model `servant` loads when it exists (without -o); the old one is kept "
+        "beside it as model.N.npz",
+    )
     _method_options(train)
     _audio_options(train)
     train.add_argument(
