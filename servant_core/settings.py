@@ -25,6 +25,16 @@ MAX_PICTURES = 1000
 # A speed above 0 but tiny (5e-324 degrees a second) made `servo move` wait for ever: the
 # slowest joint worth driving turns its quarter circle in 90 s.
 MIN_SPEED_DEG_S = 1.0
+# The fastest hobby servos turn 60 degrees in 0.05 s; a speed of 1e305 overflowed the
+# controller's speed setting.
+MAX_SPEED_DEG_S = 1500.0
+# A servo turns a few hundred degrees at most (a sail winch's multi-turn servos aside, which no
+# arm joint is); limits beyond it (1e308 passed as finite) made moves that never end.
+MAX_ABS_ANGLE = 360.0
+MIN_ANGLE_SPAN = 1.0  # narrower, the speed in pulse widths a second overflowed
+# A calibration narrower than this many microseconds maps a pulse read back from the controller
+# to an absurd angle; every hobby servo spans hundreds.
+MIN_PULSE_SPAN_US = 50.0
 MAX_FILE_BYTES = 1 << 20  # a settings file is a few KiB; more is not one
 
 
@@ -62,15 +72,30 @@ class Joint:
             return [*lines, f"joint {self.name!r}: {', '.join(not_numbers)} must be finite numbers"]
         if not self.min_angle < self.max_angle:
             lines.append(f"joint {self.name!r}: min_angle must be below max_angle")
-        if not MIN_PULSE_US <= self.min_pulse_us < self.max_pulse_us <= MAX_PULSE_US:
+        elif not (
+            -MAX_ABS_ANGLE <= self.min_angle
+            and self.min_angle + MIN_ANGLE_SPAN <= self.max_angle <= MAX_ABS_ANGLE
+        ):
             lines.append(
-                f"joint {self.name!r}: pulses must satisfy "
-                f"{MIN_PULSE_US} <= min_pulse_us < max_pulse_us <= {MAX_PULSE_US}"
+                f"joint {self.name!r}: min_angle and max_angle must lie within "
+                f"{-MAX_ABS_ANGLE:g}..{MAX_ABS_ANGLE:g} degrees (a servo's own range), "
+                f"at least {MIN_ANGLE_SPAN:g} degree apart"
             )
-        if not (_is_number(self.max_speed_deg_s) and self.max_speed_deg_s >= MIN_SPEED_DEG_S):
+        if not (
+            MIN_PULSE_US <= self.min_pulse_us
+            and self.min_pulse_us + MIN_PULSE_SPAN_US <= self.max_pulse_us <= MAX_PULSE_US
+        ):
             lines.append(
-                f"joint {self.name!r}: max_speed_deg_s must be a number of at least "
-                f"{MIN_SPEED_DEG_S:g} (degrees a second)"
+                f"joint {self.name!r}: pulses must satisfy {MIN_PULSE_US} <= min_pulse_us and "
+                f"min_pulse_us + {MIN_PULSE_SPAN_US:g} <= max_pulse_us <= {MAX_PULSE_US}"
+            )
+        if not (
+            _is_number(self.max_speed_deg_s)
+            and MIN_SPEED_DEG_S <= self.max_speed_deg_s <= MAX_SPEED_DEG_S
+        ):
+            lines.append(
+                f"joint {self.name!r}: max_speed_deg_s must be a number from "
+                f"{MIN_SPEED_DEG_S:g} to {MAX_SPEED_DEG_S:g} (degrees a second)"
             )
         home = self.home_angle
         if self.min_angle < self.max_angle and not (

@@ -64,7 +64,7 @@ def test_a_broken_file_is_named_and_never_overwritten(tmp_path, content, message
 def test_unsafe_settings_are_not_saved(tmp_path):
     settings = Settings()
     settings.joints.append(Joint("wrist", 3, 0, 90, 1000, 1500, -5, 0))
-    with pytest.raises(ServantError, match="max_speed_deg_s must be a number of at least 1"):
+    with pytest.raises(ServantError, match="max_speed_deg_s must be a number from 1 to"):
         save_settings(settings, tmp_path / "s.json")
     assert not (tmp_path / "s.json").exists()
 

@@ -340,12 +340,15 @@ class ServoLink:
 
     def settle(self, interval: float = 0.02) -> dict[str, float]:
         """Step until the goal is reached, the link is disarmed, or twice the time the move needs
-        at full speed has passed by the link's clock (a step can only be late, never too long)."""
+        at full speed has passed by the link's clock (a step can only be late, never too long).
+        A move never needs longer than crossing a joint's whole range: the first step brings a
+        joint found outside it back within, whatever the controller reported."""
         with self._lock:
             needed = max(
                 (
-                    abs(a - self.commanded[n]) / self.joints[n].max_speed_deg_s
+                    min(abs(a - self.commanded[n]), j.max_angle - j.min_angle) / j.max_speed_deg_s
                     for n, a in self.goal.items()
+                    for j in (self.joints[n],)
                 ),
                 default=0.0,
             )
