@@ -12,12 +12,15 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from servant_core.place_names import printable_name
+
 UNKNOWN_PLACE = "an unknown place"
 
 
 def place(scene: str | None) -> str:
-    """A predicted scene in words: its name, or "an unknown place" (None, the open set)."""
-    return scene or UNKNOWN_PLACE
+    """A predicted scene in words: its name, or "an unknown place" (None, the open set). A name
+    from a folder made by hand may hold a newline: it is shown escaped, on the line."""
+    return printable_name(scene) if scene else UNKNOWN_PLACE
 
 
 def confidence_text(confidence: float, unit: str | None, width: int = 0) -> str:

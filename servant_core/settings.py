@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from servant_core.errors import ServantError
+from servant_core.json_objects import unique_keys
 from servant_core.numbers import is_finite_number, json_loads
 from servant_core.storage import atomic_write_json, config_dir, no_file_yet, read_bounded_bytes
 
@@ -204,7 +205,7 @@ def load_settings(path: str | Path | None = None) -> Settings:
         return Settings()
     text = read_bounded_bytes(path, "settings file", MAX_FILE_BYTES)
     try:
-        data = json_loads(text.decode("utf-8"))
+        data = json_loads(text.decode("utf-8"), object_pairs_hook=unique_keys)
     except RecursionError as exc:
         raise ServantError(
             f"{path}: not a readable settings file (nested too deeply); {fix}"

@@ -357,7 +357,7 @@ def test_an_unknown_picture_is_asked_about_and_labelled_into_the_library(tmp_pat
     assert engine.retrain_needed  # the paper recogniser has no fold_in
     with pytest.raises(ServantError, match="no such unknown window"):
         engine.label_unknown(asked[0].window_id, "lavender_room")
-    with pytest.raises(ServantError, match="plain folder name"):
+    with pytest.raises(ServantError, match="which would make it a path"):
         engine.label_unknown(asked[-1].window_id, "../escape")
 
 

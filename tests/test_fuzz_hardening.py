@@ -5,7 +5,8 @@
 - names with control characters in scene folders and model headers: never printed raw;
 - numbers beyond float range and finite values that overflow inside the features: sensor log
   rows, board lines and float WAV samples from the extremes of every type;
-- special files (FIFOs, links to /dev/zero, folders, dangling links) wherever a file is read.
+- special files (FIFOs, links to /dev/zero, folders, dangling links) wherever a file is read;
+- (issue 41) names given to a place, and writes that fail while a label is written.
 
 Every case ends in success or one `servant: error:` line, in bounded time. About 2,000 cases a
 run (SERVANT_FUZZ_SCALE scales them), in-process.
@@ -13,6 +14,7 @@ run (SERVANT_FUZZ_SCALE scales them), in-process.
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
@@ -26,7 +28,11 @@ from hypothesis import strategies as st
 
 from servant_core.capture.sample_files import read_sample_csv
 from servant_core.capture.sensors import CHANNEL_LIMITS, CHANNELS, parse_line
+from servant_core.engine import Engine
+from servant_core.engine.learning import Kept
 from servant_core.errors import ServantError
+from servant_core.library import SceneLibrary
+from servant_core.place_names import place_key, place_name
 from tests.cli_harness import assert_clear, run_cli
 from tests.test_fuzz_files import Workspace, fuzz, mutated_model
 from tests.test_fuzz_settings import beyond_floats
@@ -262,3 +268,112 @@ def test_fuzz_special_files_are_one_line_at_once(ws: Workspace, kind: str, reade
     outcome = run_cli(*READERS[reader](ws, path))
     assert_clear(outcome, seconds=10)
     assert outcome.code == 2 or (kind, reader) == ("dangling", "settings")  # none: the defaults
+
+
+# Labels for unknown places (issue 41 items 2 and 3).
+
+# What broke a label before: too long, NUL, line breaks, escapes, reversing marks, lone
+# surrogates, separators and dots, the unknown's own name, a file's name, another case.
+NAME_PARTS = ["x" * 300, "é" * 40, "\x00", "\n", "\r", "\x1b[2J", "\u202e", "\u2028", "\ue000"]
+NAME_PARTS += ["\u200d", "/", "\\", ".", "..", "<unknown>", "Cafe", "CAFE", "notes.txt", " "]
+NAME_PARTS += ["\ud800", "\udfff"]
+typed_names = st.one_of(
+    st.text(max_size=80),
+    st.sampled_from(NAME_PARTS),
+    st.lists(st.sampled_from(NAME_PARTS) | st.text(max_size=6), min_size=1, max_size=5).map(
+        "".join
+    ),
+)
+
+
+def library_with_unknown(root: Path, sense: str = "audio") -> tuple[Engine, str]:
+    """A library holding the place `cafe` and a file `notes.txt`, and an engine (no recogniser)
+    keeping one unknown window of `sense` for a label."""
+    (root / "cafe").mkdir(parents=True)
+    (root / "notes.txt").write_text("mine")
+    engine = Engine(library_root=root)
+    rng = np.random.default_rng(1)
+    if sense == "audio":
+        kept = Kept("audio", rng.uniform(-0.5, 0.5, 4000).astype(np.float32), 8000)
+    elif sense == "image":
+        kept = Kept("image", rng.integers(0, 255, (24, 32, 3), dtype=np.uint8))
+    else:
+        kept = Kept("motion", rng.normal(size=(100, 6)), 50)
+    return engine, engine._unknowns.keep(kept)
+
+
+def tree(root: Path) -> dict[str, bytes | None]:
+    """Every entry below `root`: a file's bytes, None for a folder."""
+    return {
+        str(p.relative_to(root)): None if p.is_dir() else p.read_bytes() for p in root.rglob("*")
+    }
+
+
+@fuzz(300)
+@given(typed=typed_names)
+def test_fuzz_a_label_is_a_place_read_back_or_one_line_writing_nothing(tmp_path_factory, typed):
+    root = tmp_path_factory.mktemp("label") / "library"
+    engine, window = library_with_unknown(root)
+    before = tree(root)
+    try:
+        path = engine.label_unknown(window, typed)
+    except ServantError as error:
+        text = str(error)
+        assert "\n" not in text and not [c for c in text if c in CONTROL], text
+        assert tree(root) == before, "a refused name writes nothing"
+        path = engine.label_unknown(window, "kitchen")  # and loses nothing
+        assert path.parent == root / "kitchen"
+        return
+    place = path.parent.name
+    assert path.parent.parent == root and path.is_file()
+    assert place_key(place) == place_key(typed.strip())
+    assert place_name(typed, root) == place, "typed again, the same place"
+    library = SceneLibrary.scan(root)
+    assert [r.scene for r in library.recordings if r.path == path] == [place]
+    assert sorted(library.scenes) == sorted({"cafe", place})
+    with pytest.raises(ServantError, match="no such unknown window"):
+        engine.label_unknown(window, typed)
+
+
+FAILED_WRITES = [errno.ENOSPC, errno.ENAMETOOLONG, errno.EACCES, errno.EROFS, errno.EIO]
+# Where a write can fail: the place's folder made, the temporary file made or written, the
+# temporary file moved into place.
+STAGES = {
+    "folder": (Path, "mkdir"),
+    "temporary": ("servant_core.storage.tempfile.mkstemp",),
+    "sync": ("servant_core.storage.os.fsync",),
+    "replace": ("servant_core.storage.os.replace",),
+}
+
+
+@fuzz(120)
+@given(
+    sense=st.sampled_from(["audio", "image", "motion"]),
+    code=st.sampled_from(FAILED_WRITES),
+    stage=st.sampled_from(sorted(STAGES)),
+    failures=st.integers(1, 3),
+    place=st.sampled_from(["cafe", "kitchen"]),
+)
+def test_fuzz_a_label_whose_write_fails_can_be_given_again(
+    tmp_path_factory, sense, code, stage, failures, place
+):
+    """Issue 41 item 2: the window was taken out before its write, so a full disk lost it."""
+    root = tmp_path_factory.mktemp("failing") / "library"
+    engine, window = library_with_unknown(root, sense)
+    before = tree(root)
+
+    def failing(*args, **kwargs):
+        raise OSError(code, os.strerror(code))
+
+    for _ in range(failures):
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(*STAGES[stage], failing)
+            with pytest.raises(ServantError) as failed:
+                engine.label_unknown(window, place)
+        assert str(failed.value).count("\n") == 0 and os.strerror(code) in str(failed.value)
+        assert {k: v for k, v in tree(root).items() if v is not None} == {
+            k: v for k, v in before.items() if v is not None
+        }, "no file, whole or part, is left"
+    path = engine.label_unknown(window, place)
+    assert path.parent == root / place and path.is_file()
+    assert len(tree(root)) == len(before) + 1 + (place not in before)

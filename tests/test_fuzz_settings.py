@@ -234,3 +234,75 @@ def test_any_number_beyond_floats_is_refused_in_one_line(tmp_path, pick, value, 
         load_records(path) if records else load_settings(path)
     one_clear_line(refused.value, path)
     assert "too large" in str(refused.value)
+
+
+# Any JSON value the reader parses (no number beyond floats, refused first for itself).
+parsed_values = st.recursive(
+    st.one_of(
+        st.none(), st.booleans(), st.integers(-(2**70), 2**70), st.floats(), st.text(max_size=20)
+    ),
+    lambda children: (
+        st.lists(children, max_size=4) | st.dictionaries(st.text(max_size=10), children, max_size=4)
+    ),
+    max_leaves=12,
+)
+
+
+def objects_in(node: Any, prefix: tuple = ()) -> list[tuple]:
+    """The place of every object (dict) in a JSON document, the document itself first."""
+    if isinstance(node, list):
+        return [p for i, value in enumerate(node) for p in objects_in(value, (*prefix, i))]
+    if not isinstance(node, dict):
+        return []
+    return [prefix, *(p for key, value in node.items() for p in objects_in(value, (*prefix, key)))]
+
+
+def encoded(node: Any, twice: tuple, key: str, value: Any, at: int, prefix: tuple = ()) -> str:
+    """`node` as JSON text, the object at `twice` holding `key` a second time (with `value`),
+    inserted as its `at`-th member: text `json.dumps` cannot write."""
+    if isinstance(node, list):
+        inner = (encoded(v, twice, key, value, at, (*prefix, i)) for i, v in enumerate(node))
+        return "[" + ", ".join(inner) + "]"
+    if not isinstance(node, dict):
+        return json.dumps(node)
+    members = [
+        f"{json.dumps(k)}: {encoded(v, twice, key, value, at, (*prefix, k))}"
+        for k, v in node.items()
+    ]
+    if prefix == twice:
+        members.insert(at % (len(members) + 1), f"{json.dumps(key)}: {json.dumps(value)}")
+    return "{" + ", ".join(members) + "}"
+
+
+@FUZZ
+@given(
+    records=st.booleans(),
+    pick=st.integers(0, 10**6),
+    new_key=st.one_of(st.none(), st.text(max_size=60)),
+    value=parsed_values,
+    at=st.integers(0, 100),
+)
+def test_any_key_given_twice_is_refused_naming_it(tmp_path, records, pick, new_key, value, at):
+    """Issue 41 item 5: Python's json keeps the last of two equal keys, so a shoulder's second
+    `max_angle` silently won. Any object of a settings or teach record file holding a key twice
+    (one of its own keys again, or any key written twice) is refused in one line naming the key,
+    and the file is left as it was."""
+    document = valid_records() if records else Settings().to_json()
+    where = objects_in(document)
+    twice = where[pick % len(where)]
+    target = document
+    for step in twice:
+        target = target[step]
+    own = sorted(target)
+    key = own[pick % len(own)] if new_key is None and own else (new_key or "")
+    if key not in target:
+        target[key] = value  # written once here, and once more by `encoded`
+    content = encoded(document, twice, key, value, at).encode()
+    path = tmp_path / "file.json"
+    path.write_bytes(content)
+    with pytest.raises(ServantError) as refused:
+        load_records(path) if records else load_settings(path)
+    one_clear_line(refused.value, path)
+    shown = key if len(key) <= 40 else key[:40] + "…"
+    assert f"the key {shown!r} is given twice" in str(refused.value)
+    assert path.read_bytes() == content

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from servant_core.actions.records import TeachRecord, label_scores, save_records
 from servant_core.cli import build_parser, terminal_text
 from servant_core.cli.arm import run_teach
 from servant_core.cli.live import _printer
@@ -65,13 +66,17 @@ def test_run_escapes_the_scenes_of_its_events(capsys: pytest.CaptureFixture[str]
 
 
 def test_teach_escapes_scenes_read_from_the_records(tmp_path: Path) -> None:
+    """A label holding control characters is refused as it is typed (`place_names`); one in a
+    records file written before that rule, or by hand, is still shown escaped."""
     records = tmp_path / "records.json"
+    save_records([TeachRecord(HOSTILE, label_scores(HOSTILE), {"shoulder": 10.0}, 1.0)], records)
     parser = build_parser()
     argv = ["teach", "--records", str(records), "--learner", str(tmp_path / "l.npz")]
     args = parser.parse_args([*argv, "--iterations", "50"])
     out = io.StringIO()
-    script = f"{HOSTILE}\n10\ngym\n80\n\n{HOSTILE}\n"
+    script = f"{HOSTILE}\ngym\n80\n\n{HOSTILE}\n"
     assert run_teach(args, io.StringIO(script), out) == 0
+    assert "control character U+001B" in out.getvalue()
     assert "PWNED" in out.getvalue()
     assert_inert(out.getvalue())
     again = io.StringIO()

@@ -4,6 +4,7 @@ Long jobs (retrain, evaluate) show a progress bar with an estimate of the time l
 
 from __future__ import annotations
 
+import errno
 import shutil
 
 import pytest
@@ -201,8 +202,11 @@ async def test_a_label_the_engine_cannot_use_is_reported(tmp_path):
         await settle(pilot, lambda: said(app, "window-7: no longer kept"))
 
 
-async def test_a_relabel_that_cannot_move_the_file_is_reported(tmp_path):
+async def test_a_relabel_that_cannot_move_the_file_is_reported(tmp_path, monkeypatch):
     from servant_tui.screens.dialogs import ScenePrompt
+
+    def disk_full(source, target):
+        raise OSError(errno.ENOSPC, "No space left on device")
 
     root = write_library(tmp_path / "library")
     app = ServantApp(ReplayEngine(), library_root=root)
@@ -214,7 +218,15 @@ async def test_a_relabel_that_cannot_move_the_file_is_reported(tmp_path):
         await settle(pilot, lambda: isinstance(app.screen, ScenePrompt))
         app.screen.query_one(Input).value = "blocked"
         await pilot.press("enter")
-        await settle(pilot, lambda: said(app, "cannot move it to blocked"))
+        await settle(pilot, lambda: said(app, "'blocked' in the library"))
+        assert (root / "blocked").read_text() == "", "the file is left as it was"
+
+        monkeypatch.setattr("servant_tui.screens.library.os.replace", disk_full)
+        await pilot.press("r")
+        await settle(pilot, lambda: isinstance(app.screen, ScenePrompt))
+        app.screen.query_one(Input).value = "kitchen"
+        await pilot.press("enter")
+        await settle(pilot, lambda: said(app, "cannot move it to kitchen (No space left"))
         assert (root / "cafe" / "rec0.wav").exists(), "nothing lost"
 
 

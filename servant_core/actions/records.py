@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from servant_core.errors import ServantError
+from servant_core.json_objects import unique_keys
 from servant_core.numbers import is_finite_number, json_loads
 from servant_core.storage import (
     atomic_write_bytes,
@@ -180,7 +181,7 @@ def _read(path: Path, legacy_joint: str) -> tuple[int, list[TeachRecord]]:
     fix = "fix or move the file away (Servant never overwrites it)"
     text = read_bounded_bytes(path, "teach record file", MAX_FILE_BYTES)
     try:
-        data = json_loads(text.decode("utf-8"))
+        data = json_loads(text.decode("utf-8"), object_pairs_hook=unique_keys)
     except RecursionError as exc:
         raise ServantError(
             f"{path}: not a readable teach record file (nested too deeply); {fix}"

@@ -29,6 +29,7 @@ from servant_core.cli import emit, serve_until_stopped, terminal_text, write_lin
 from servant_core.cli.options import bounded_int, finite_float
 from servant_core.errors import ServantError
 from servant_core.event_text import pose_text
+from servant_core.place_names import place_key, place_name
 from servant_core.servo import PROTOCOLS
 from servant_core.servo.calibration import clamp_pose, pulse_to_angle
 from servant_core.servo.emulator import ServoEmulator, start_emulator
@@ -372,7 +373,7 @@ def _train(
         + (", or `record [seconds]` to read the pose you guide the arm into" if link else "")
         + ". An empty label ends training."
     )
-    while label := session.ask("Scene label: "):
+    while (label := _ask_label(session, records)) is not None:
         answer = _ask_pose(session, joint, joints, link)
         if answer is None:
             session.say(f"No action for {label}; nothing recorded.")
@@ -399,6 +400,17 @@ def _train(
         session.say(f"Error after {iterations} {unit}: {error:.4f} degrees")
 
     return learner.fit(records, report=report)
+
+
+def _ask_label(session: Session, records: list[TeachRecord]) -> str | None:
+    """The next place's label by the rule for places' names (`place_names`), asked again until
+    it is one; a place already taught in another case is that place. None when labels end."""
+    while label := session.ask("Scene label: "):
+        try:
+            return place_name(label, known=[r.scene for r in records])
+        except ServantError as error:
+            session.say(str(error))
+    return None
 
 
 def _ask_pose(
@@ -444,6 +456,8 @@ def _record_pose(
 def _predict(learner: ActionLearner, session: Session, link: ServoLink | None) -> None:
     session.say("Prediction phase. Type a scene label; an empty line ends.")
     while label := session.ask("Tell me something: "):
+        # a place taught as `cafe` is the place asked about as `Cafe`, as when it is taught
+        label = next((s for s in learner.scenes_ if place_key(s) == place_key(label)), label)
         # A typed label is certain: confidence 100 %, one-hot scores.
         prediction = learner.predict(label_scores(label, learner.scenes_), label, 100.0)
         if prediction.pose is None:

@@ -75,6 +75,7 @@ from servant_core.fusion import (
 from servant_core.fusion.elsewhere import beside_open_sound, open_decision, shown, steady_open
 from servant_core.fusion.smoothing import SceneSmoother
 from servant_core.library import SceneLibrary
+from servant_core.place_names import place_name
 from servant_core.recognisers import FRESH_METHODS, UNKNOWN, Recogniser
 from servant_core.recognisers.base import answers, knows_elsewhere
 from servant_core.senses import SAMPLE_SENSES, SENSES
@@ -868,6 +869,12 @@ class Engine:
         found = {"audio": self.acoustic, "image": self.visual, **self.sample_recognisers}
         return {sense: model for sense, model in found.items() if model is not None}
 
+    def _known_scenes(self) -> list[str]:
+        """The places the recognisers know, which a label may name in another case."""
+        with self._lock:
+            models = list(self._recognisers_by_sense().values())
+        return sorted({str(s) for model in models for s in getattr(model, "scenes_", [])})
+
     def _report_error(self, error: ServantError) -> None:
         self._error(str(error))
 
@@ -880,15 +887,18 @@ class Engine:
         """Give the scene the user named to an unknown window, picture or sample sense's window
         (from `UnknownScene`).
 
-        It is written into the library (`library_root/<scene>/`, atomically), then folded into a
-        copy of the recogniser that replaces it, if it has `fold_in(X, scenes)`; otherwise
-        `retrain_needed` becomes True. With a `model_path`, the updated model is saved there.
-        Returns the file written.
+        The name must pass `place_names.place_name` (one naming a known place in another case
+        is that place). It is written into the library (`library_root/<scene>/`, atomically),
+        then folded into a copy of the recogniser that replaces it, if it has `fold_in(X,
+        scenes)`; otherwise `retrain_needed` becomes True. With a `model_path`, the updated model
+        is saved there. Returns the file written. A refused name or a failed write is one
+        ServantError, and the window can still be labelled.
         """
-        scene = learning.checked_scene(scene)
-        kept = self._unknowns.take(window_id)
         root = self.library_root or data_dir() / "library"
-        path = learning.write_labelled(root, scene, window_id, kept)
+        scene = place_name(scene, root, self._known_scenes())
+        # out of the store only once written: a label whose write fails can be given again
+        with self._unknowns.labelling(window_id) as kept:
+            path = learning.write_labelled(root, scene, window_id, kept)
         with self._update_lock:
             with self._lock:
                 recogniser = self._recognisers_by_sense().get(kept.sense)

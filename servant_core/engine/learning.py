@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import copy
 import functools
-import re
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -49,7 +49,7 @@ from servant_core.recognisers import Recogniser, make_recogniser
 from servant_core.recognisers.background import kept_out
 from servant_core.recognisers.base import fit_visits
 from servant_core.senses import SAMPLE_SENSES, SENSES
-from servant_core.storage import atomic_write_bytes
+from servant_core.storage import atomic_write_bytes, os_reason
 
 UNKNOWN_KEPT = 16  # unknown windows/pictures kept for the user to label, the oldest dropped first
 
@@ -80,6 +80,7 @@ class Unknowns:
     def __init__(self) -> None:
         self._kept: OrderedDict[str, Kept] = OrderedDict()
         self._count = 0
+        self._labelling: set[str] = set()
         self._lock = threading.Lock()
 
     def keep(self, kept: Kept) -> str:
@@ -87,18 +88,38 @@ class Unknowns:
             self._count += 1
             window_id = f"{kept.sense}-{self._count}"
             self._kept[window_id] = kept
-            while len(self._kept) > UNKNOWN_KEPT:
-                self._kept.popitem(last=False)
+            # the oldest go first, but not one whose label is being written: if that write
+            # fails, the label can still be given again
+            idle = [w for w in self._kept if w not in self._labelling]
+            for oldest in idle[: max(len(self._kept) - UNKNOWN_KEPT, 0)]:
+                del self._kept[oldest]
         return window_id
 
-    def take(self, window_id: str) -> Kept:
+    @contextmanager
+    def labelling(self, window_id: str) -> Iterator[Kept]:
+        """The window, given up only when the block ends without an error (its label written):
+        one whose write failed can be labelled again. While a label is being written the window
+        is not given to another."""
         with self._lock:
-            kept = self._kept.pop(window_id, None)
+            kept = self._kept.get(window_id)
+            busy = window_id in self._labelling
+            if kept is not None and not busy:
+                self._labelling.add(window_id)
         if kept is None:
             raise ServantError(
                 f"{window_id}: no such unknown window (only the last {UNKNOWN_KEPT} are kept)"
             )
-        return kept
+        if busy:
+            raise ServantError(f"{window_id}: a label for it is being written; wait for it")
+        written = False
+        try:
+            yield kept
+            written = True
+        finally:
+            with self._lock:
+                self._labelling.discard(window_id)
+                if written:
+                    self._kept.pop(window_id, None)
 
 
 def copy_or_fresh(recogniser: Recogniser | None, sense: str, method: str) -> Any:
@@ -242,28 +263,31 @@ def refit_pictures(
     return model.fit(model.featurize(images), [p.scene for p in kept])
 
 
-def checked_scene(scene: str) -> str:
-    """The scene name a user typed, if it can be a library folder; ServantError if not."""
-    scene = scene.strip()
-    if not re.fullmatch(r"[^/\\.][^/\\]*", scene):
-        raise ServantError(f"scene name {scene!r}: use a plain folder name, e.g. 'kitchen'")
-    return scene
-
-
 def write_labelled(root: Path, scene: str, window_id: str, kept: Kept) -> Path:
-    """Write a labelled unknown into the library (`root/<scene>/`, atomically); the file."""
+    """Write a labelled unknown into the library (`root/<scene>/`, atomically); the file. A
+    write that fails (a full disk, a folder that cannot be made) is one ServantError."""
+    try:
+        return _write_kept(root / scene, window_id, kept)
+    except OSError as exc:
+        raise ServantError(
+            f"{window_id}: the label {scene} cannot be written to {root / scene} "
+            f"({os_reason(exc)}); make room or fix the folder, then give the label again"
+        ) from None
+
+
+def _write_kept(folder: Path, window_id: str, kept: Kept) -> Path:
     stamp = time.strftime("%Y%m%d-%H%M%S")
     if kept.sense == "audio":
         heard = np.concatenate(kept.windows)
-        return write_wav(root / scene / f"heard-{stamp}-{window_id}.wav", heard, kept.rate)
+        return write_wav(folder / f"heard-{stamp}-{window_id}.wav", heard, kept.rate)
     if kept.sense in SAMPLE_SENSES:
         kind = SENSES[kept.sense]
-        path = root / scene / f"felt-{stamp}-{window_id}{kind.suffixes[0]}"
+        path = folder / f"felt-{stamp}-{window_id}{kind.suffixes[0]}"
         return write_sample_csv(path, kept.data, kept.rate, str(kind.stream))
     ok, png = cv2.imencode(".png", kept.data)
     if not ok:
         raise ServantError(f"{window_id}: the picture could not be encoded as PNG")
-    return atomic_write_bytes(root / scene / f"seen-{stamp}-{window_id}.png", png.tobytes())
+    return atomic_write_bytes(folder / f"seen-{stamp}-{window_id}.png", png.tobytes())
 
 
 def folded_in(recogniser: Any, kept: Kept, scene: str) -> Any:

@@ -18,6 +18,7 @@ from servant_core.engine.learning import retrained_text
 from servant_core.errors import ServantError
 from servant_core.evaluate import TAUGHT, evaluate_audio
 from servant_core.library import SceneLibrary
+from servant_core.place_names import place_name, printable_name
 from servant_core.recognisers import FRESH_METHODS
 from servant_tui.messages import EvaluationDone, RetrainDone
 from servant_tui.screens.dialogs import Confirm, ScenePrompt
@@ -170,12 +171,14 @@ class LibraryScreen(ReportsWorkerErrors, Screen[None]):
             return
 
         def relabelled(scene: str | None) -> None:
-            if not scene or scene == self.scene:
+            if not scene:
                 return
-            if "/" in scene or scene.startswith("."):
-                self.app.report_error(
-                    ServantError(f"{scene!r}: a scene name cannot hold '/' or start with '.'")
-                )
+            try:
+                scene = place_name(scene, self.root, self.library.scenes if self.library else [])
+            except ServantError as error:
+                self.app.report_error(error)
+                return
+            if scene == self.scene:
                 return
             folder = self.root / scene
             try:
@@ -187,7 +190,8 @@ class LibraryScreen(ReportsWorkerErrors, Screen[None]):
                     ServantError(f"{path}: cannot move it to {scene} ({error.strerror})")
                 )
                 return
-            self.app.log_line(None, f"moved {path.name} from {self.scene} to {scene}")
+            name, before, after = map(printable_name, (path.name, self.scene or "", scene))
+            self.app.log_line(None, escape(f"moved {name} from {before} to {after}"))
             self.rescan()
 
         self.app.push_screen(

@@ -15,6 +15,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from rich.markup import escape
 from rich.text import Text
 from textual import events, on, work
 from textual.app import ComposeResult
@@ -45,6 +46,7 @@ from servant_core.event_text import angle_text, pose_text
 from servant_core.events import SpectrumFrame
 from servant_core.features.palette import dominant_colours
 from servant_core.library import TEACH_WINDOWS, SceneLibrary
+from servant_core.place_names import place_name
 from servant_core.senses import SENSES
 from servant_core.storage import atomic_write_bytes
 from servant_tui.messages import (
@@ -314,14 +316,14 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
         if not scene:
             self.notify("Pick a known scene or type a new name.", severity="warning")
             return
-        if "/" in scene or scene.startswith("."):
-            self.app.report_error(
-                ServantError(f"{scene!r}: a scene name cannot hold '/' or start with '.'")
-            )
+        try:
+            scene = place_name(scene, self.root, self.known_scenes())
+        except ServantError as error:
+            self.app.report_error(error)
             return
         self.scene = scene
         self.sub_title = f"teaching {scene}"
-        self.app.log_line(None, f"teaching scene {scene}")
+        self.app.log_line(None, f"teaching scene {escape(scene)}")
         self.go("sound")
 
     # -- 2 sound ----------------------------------------------------------------------------------
