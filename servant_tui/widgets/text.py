@@ -8,9 +8,10 @@ from servant_core.errors import ServantError
 
 
 def clock(t: float) -> str:
-    """Engine time as minutes:seconds since the engine started."""
-    minutes, seconds = divmod(max(t, 0.0), 60.0)
-    return f"{int(minutes):02d}:{seconds:04.1f}"
+    """Engine time as minutes:seconds since the engine started, to a tenth of a second."""
+    # Rounded to tenths before the split: rounding the seconds after it showed 59.96 s as 00:60.0.
+    minutes, tenths = divmod(round(max(t, 0.0) * 10), 600)
+    return f"{minutes:02d}:{tenths / 10:04.1f}"
 
 
 def bar(fraction: float, width: int, style: str = "green") -> Text:
