@@ -119,10 +119,12 @@ def replace_model(
     recognisers: dict[str, Recogniser],
     fusion: FusionNet | None,
     stamp: tuple[int, int, int] | None,
+    backup: bool = True,
 ) -> Path | None:
     """`save_model` for a run that began when `path` had `stamp` (`file_stamp`): refused when
     another writer (a second `servant train`, the app's retrain) changed it since, so that the
-    last one does not silently win; the model replaced is kept as a numbered backup, returned."""
+    last one does not silently win; with `backup`, the model replaced is kept as a numbered
+    backup, returned."""
     if file_stamp(path) != stamp:
         raise ServantError(
             f"{path}: was written by someone else while this training ran (another `servant "
@@ -130,14 +132,14 @@ def replace_model(
             "-o FILE"
         )
     try:
-        backup = numbered_backup(path)
+        kept = numbered_backup(path) if backup else None
     except OSError as exc:
         raise ServantError(
             f"{path}: cannot keep a backup of the model there ({os_reason(exc)}); the previous "
             "file is unchanged, give -o FILE"
         ) from None
     save_model(path, recognisers, fusion)
-    return backup
+    return kept
 
 
 def check_model_output(path: str | Path) -> Path:

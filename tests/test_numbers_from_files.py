@@ -152,4 +152,4 @@ def test_a_joint_speed_too_small_to_finish_a_move_is_refused(tmp_path: Path, spe
     outcome = run_cli_subprocess(
         "servo", "move", "--settings", str(path), "--dry-run", "shoulder=5", timeout=20
     )
-    assert_refused(outcome, "max_speed_deg_s", "at least 1")
+    assert_refused(outcome, "max_speed_deg_s", "from 1 to")

@@ -43,6 +43,7 @@ from servant_core.library import (
     visits_of,
 )
 from servant_core.modelfile import check_model_output, load_model_and_fusion, replace_model
+from servant_core.place_names import printable_name
 from servant_core.progress import Progress
 from servant_core.recognisers import (
     UNKNOWN,
@@ -166,7 +167,8 @@ def cmd_train(args: argparse.Namespace) -> int:
             if fusion is not None
             else {"fallback": reason}
         )
-    backup = replace_model(output, recognisers, fusion, stamp)
+    # the model `servant` loads is kept when replaced; a file named with -o is the user's say
+    backup = replace_model(output, recognisers, fusion, stamp, backup=args.output is None)
     summary["model"] = str(output)
     summary["backup"] = None if backup is None else str(backup)
     lines = [f"model written to {output}"]
@@ -175,14 +177,12 @@ def cmd_train(args: argparse.Namespace) -> int:
     for role in ("acoustic", "visual", *SAMPLE_SENSES):
         if role in SAMPLE_SENSES and role in summary:
             s = summary[role]
-            lines.append(f"{role}: {s['method']} on its logs, scenes {', '.join(s['scenes'])}")
+            lines.append(f"{role}: {s['method']} on its logs, scenes {_names(s['scenes'])}")
         elif role in summary:
             s = summary[role]
             count = s.get("n_windows", s.get("n_pictures"))
             unit = "windows" if "n_windows" in s else "pictures"
-            lines.append(
-                f"{role}: {s['method']} on {count} {unit}, scenes {', '.join(s['scenes'])}"
-            )
+            lines.append(f"{role}: {s['method']} on {count} {unit}, scenes {_names(s['scenes'])}")
     if "fusion" in summary:
         f = summary["fusion"]
         lines.append(
@@ -193,6 +193,11 @@ def cmd_train(args: argparse.Namespace) -> int:
     lines += [f"warning: {w}" for w in summary["warnings"]]
     emit(args, summary, "\n".join(lines))
     return 0
+
+
+def _names(scenes: list[str]) -> str:
+    """Places as one line, a folder's name holding a newline or an escape shown escaped."""
+    return ", ".join(printable_name(scene) for scene in scenes)
 
 
 def _raise(error: ServantError) -> None:
