@@ -10,11 +10,16 @@ VMIC := $(SHARED)/scripts/virtual-mic.sh
 
 setup: $(VENV)/.installed
 
+# pip's and setuptools' chatter (an editable install's warning about folders named like the
+# package, which is how this checkout is meant to be used) goes to a log, shown only on failure.
 $(VENV)/.installed: pyproject.toml
 	bash scripts/install-system-packages
+	@echo "servant: making the virtual env $(VENV)"
 	python3 -m venv $(VENV)
-	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[test]'
+	@echo "servant: installing Python packages into $(VENV) (Textual, NumPy, scikit-learn, OpenCV, BirdNET and the test tools; a minute or two)"
+	@$(PY) -m pip install -q --upgrade pip > $(VENV)/install.log 2>&1 || { cat $(VENV)/install.log; exit 1; }
+	@$(PY) -m pip install -q -e '.[test]' >> $(VENV)/install.log 2>&1 || { cat $(VENV)/install.log; exit 1; }
+	@echo "servant: installed (pip's log: $(VENV)/install.log)"
 	touch $@
 
 install: setup

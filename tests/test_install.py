@@ -44,3 +44,24 @@ def test_the_readme_says_how_to_get_servant_on_the_path_before_using_it():
     first_use = readme.index("run `servant`")
     assert -1 < readme.find("make install") < first_use
     assert -1 < readme.find("source .venv/bin/activate") < first_use
+
+
+def test_make_setup_says_what_it_installs_and_keeps_pips_chatter_in_a_log(tmp_path):
+    """Issue 39 item 14: `make demo` was a minute of silent `pip -q`, then setuptools'
+    'BuildBackendWarning: Editable installation … be careful with folders'. Read from make's own
+    plan of the commands (`make -n`), which runs none of them."""
+    venv = tmp_path / "venv"
+    planned = subprocess.run(
+        ["make", "-C", str(REPO), "-n", "-B", f"{venv}/.installed", f"VENV={venv}"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert planned.returncode == 0, planned.stderr
+    installs = [line for line in planned.stdout.splitlines() if "pip install" in line]
+    assert installs and all(
+        f"> {venv}/install.log" in line or f">> {venv}/install.log" in line for line in installs
+    ), installs
+    assert all("cat" in line and "exit 1" in line for line in installs)  # shown on failure
+    said = [line for line in planned.stdout.splitlines() if line.startswith("echo")]
+    assert any("installing Python packages" in line for line in said), said
