@@ -8,10 +8,12 @@ pulled.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import secrets
 import threading
 import tty
+from collections.abc import Callable
 from pathlib import Path
 from typing import Self
 
@@ -84,6 +86,61 @@ def _make_link(path: Path, device: str) -> Path:
             "give a path in a folder you can write to"
         ) from exc
     return path
+
+
+def _announced_folder() -> Path:
+    from servant_core.storage import runtime_dir
+
+    return runtime_dir() / "ports"
+
+
+def announce(port: str, description: str) -> Callable[[], None]:
+    """Leave word that `port` is served by this process, described as `description`, so that
+    `servant servo list-ports` lists it beside the machine's own ports (which a pseudo-terminal
+    is not among). Returns what withdraws the word; a word left by a process that died is
+    ignored (and removed) by `announced_ports`. Best effort: a folder that cannot be written
+    only leaves the port unlisted."""
+    folder = _announced_folder()
+    entry = folder / f"{os.getpid()}-{secrets.token_hex(4)}.json"
+    with contextlib.suppress(OSError):
+        folder.mkdir(parents=True, exist_ok=True, mode=0o700)
+        record = {"port": port, "pid": os.getpid(), "description": description}
+        from servant_core.storage import atomic_write_json
+
+        atomic_write_json(entry, record)
+    return lambda: entry.unlink(missing_ok=True)
+
+
+def announced_ports() -> list[dict[str, str]]:
+    """The ports running emulators announced (`announce`) whose process lives and whose port
+    is still there, as `{"port", "description"}`."""
+    found: list[dict[str, str]] = []
+    try:
+        entries = sorted(_announced_folder().glob("*.json"))
+    except OSError:
+        return found
+    for entry in entries:
+        try:
+            record = json.loads(entry.read_text(encoding="utf-8"))
+            port, pid, said = str(record["port"]), int(record["pid"]), str(record["description"])
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        if _alive(pid) and os.path.exists(port):
+            found.append({"port": port, "description": said})
+        else:
+            with contextlib.suppress(OSError):
+                entry.unlink()
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, ValueError):
+        return pid > 0
+    return pid > 0
 
 
 class PtyService:

@@ -44,6 +44,19 @@ def config_dir() -> Path:
     return Path(override) if override else Path(platformdirs.user_config_dir(APP_NAME))
 
 
+def runtime_dir() -> Path:
+    """Where running programs leave word of themselves for this user (an emulator's port):
+    `SERVANT_RUNTIME_DIR`, else the platform's runtime folder where it exists (it is made at
+    login, not by programs), else a folder of this user's in the temporary directory."""
+    override = os.environ.get("SERVANT_RUNTIME_DIR")
+    if override:
+        return Path(override)
+    runtime = Path(platformdirs.user_runtime_dir(APP_NAME))
+    if runtime.parent.is_dir():
+        return runtime
+    return Path(tempfile.gettempdir()) / f"{APP_NAME}-{os.getuid()}"
+
+
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
     """Write `data` to a temporary file beside `path`, then `os.replace` it into place.
 

@@ -61,6 +61,7 @@ def _private_dirs(
     base = tmp_path_factory.mktemp("servant-home")
     monkeypatch.setenv("SERVANT_DATA_DIR", str(base / "data"))
     monkeypatch.setenv("SERVANT_CONFIG_DIR", str(base / "config"))
+    monkeypatch.setenv("SERVANT_RUNTIME_DIR", str(base / "run"))
 
 
 def link_library(root: Path, shared: Path, scenes: dict[str, tuple[list[str], int]]) -> Path:

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import json
+import signal
+
 import pytest
 import serial
 
@@ -9,6 +12,7 @@ from servant_core.servo import firmata, maestro, ssc32
 from servant_core.servo.emulator import start_emulator
 from servant_core.servo.link import ManualClock, ServoLink
 from servant_core.settings import default_joints
+from tests.conftest import servant, serve
 
 
 @pytest.fixture
@@ -128,3 +132,20 @@ def test_link_moves_the_emulated_arm_and_reads_it_back(protocol, resolution, clo
             )
     finally:
         emulator.stop()
+
+
+@pytest.mark.parametrize("command", ["emulate-servo", "emulate-sensors"])
+def test_list_ports_names_a_running_emulators_port_and_forgets_it_once_stopped(command):
+    """Issue 39 item 13: `servant servo list-ports` listed /dev/ttyS0 but not the emulator's
+    pseudo-terminal, which README step 1 tells the user to look for there."""
+    proc, port = serve(command, "--seconds", "60")
+    try:
+        listed = json.loads(servant("servo", "list-ports", "--json").stdout)
+        mine = [p for p in listed if p["port"] == port]
+        assert len(mine) == 1 and f"servant {command}" in mine[0]["description"], listed
+        plain = servant("servo", "list-ports").stdout
+        assert port in plain and "No serial ports found" not in plain
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=30)
+    assert port not in servant("servo", "list-ports").stdout

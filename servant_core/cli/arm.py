@@ -30,6 +30,7 @@ from servant_core.cli.options import bounded_int, finite_float
 from servant_core.errors import ServantError
 from servant_core.event_text import pose_text
 from servant_core.place_names import place_key, place_name
+from servant_core.pty_port import announce, announced_ports
 from servant_core.servo import PROTOCOLS
 from servant_core.servo.calibration import clamp_pose, pulse_to_angle
 from servant_core.servo.emulator import ServoEmulator, start_emulator
@@ -176,6 +177,7 @@ def run_list_ports(args: argparse.Namespace) -> int:
     from serial.tools import list_ports
 
     ports = [{"port": p.device, "description": p.description} for p in list_ports.comports()]
+    ports += announced_ports()  # the emulators' pseudo-terminals, which comports never lists
     text = "\n".join(f"{p['port']}\t{p['description']}" for p in ports) or (
         "No serial ports found. Without hardware, `servant emulate-servo` "
         "starts an emulated controller."
@@ -233,8 +235,12 @@ def run_emulate(args: argparse.Namespace) -> int:
         target=_say_moves, args=(emulator, joints, stop), name="emulator-moves", daemon=True
     )
     watcher.start()
+    withdraw = announce(
+        port, f"Servant's emulated {PROTOCOLS[args.protocol].title} (servant emulate-servo)"
+    )
 
     def stop_serving() -> None:
+        withdraw()
         stop.set()
         watcher.join()
         emulator.stop()

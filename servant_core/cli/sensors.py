@@ -40,6 +40,7 @@ def run_emulate_sensors(args: argparse.Namespace) -> int:
     from servant_core.demo.motion_synth import SCENE_AMBIENT
     from servant_core.demo.scenes import segment_at
     from servant_core.errors import ServantError
+    from servant_core.pty_port import announce
 
     if args.script:
         script = parse_script(args.script)
@@ -56,8 +57,14 @@ def run_emulate_sensors(args: argparse.Namespace) -> int:
         scene_at, seed=args.seed, imu_rate=args.imu_rate, ambient_rate=args.ambient_rate
     )
     port = emulator.start(args.link)
+    withdraw = announce(port, "Servant's emulated sensor board (servant emulate-sensors)")
+
+    def stop_serving() -> None:
+        withdraw()
+        emulator.stop()
+
     return serve_until_stopped(
-        emulator.stop,
+        stop_serving,
         f"Emulating the sensor board on {port} ({args.imu_rate} Hz motion, "
         f"{args.ambient_rate} Hz ambient); connect with `--imu {port}`. Ctrl-C stops.",
         args.seconds,
