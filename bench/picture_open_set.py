@@ -3,7 +3,8 @@
 The sound knows somewhere else (a background of places it may ship, `<elsewhere>`, and the
 nearest taught window); the pictures do not, and are shown as "× average" beside it
 (`fusion/elsewhere.py`). This bench asks whether they could: for each library size and draw,
-`--pictures` pictures of each taught picture scene are taught to `fisher-bovw` (as teach mode
+`--pictures` pictures of each taught picture scene are taught to `--method` (`fisher-bovw`
+unless told; `effnet`: an ImageNet network's embedding under the sound's head) (as teach mode
 and `bench/wearer_day.py` teach them), then it scores other pictures of the taught scenes (the
 same kind of place: another café, as the walk shows them) against pictures of scenes not taught.
 
@@ -25,7 +26,7 @@ Also: the share of untaught pictures the recogniser's own open set (`SceneCentro
 unknown, and of taught-kind pictures.
 
     OMP_NUM_THREADS=1 python bench/picture_open_set.py [--sizes 2,3,5] [--draws 6]
-        [--pictures 6] [--background 100]
+        [--pictures 6] [--background 100] [--method fisher-bovw]
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ from sklearn.metrics import roc_auc_score
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.common import shared_data  # noqa: E402
+from servant_core.features.descriptors import hsv_histogram, square_thumbnail  # noqa: E402
 from servant_core.library import read_picture  # noqa: E402
 from servant_core.recognisers import UNKNOWN, make_recogniser  # noqa: E402
 from servant_core.recognisers.background import ELSEWHERE  # noqa: E402
@@ -77,7 +79,7 @@ def one_draw(X: np.ndarray, hsv: np.ndarray, scenes: np.ndarray, size: int, args
                 far_half += list(rows[:TESTED])
             else:
                 back += list(rows[TESTED : TESTED + args.background])
-    model = make_recogniser("image", "fisher-bovw").fit(X[train], scenes[train])
+    model = make_recogniser("image", args.method).fit(X[train], scenes[train])
     tested = same_kind + elsewhere
     truth = np.r_[np.ones(len(same_kind)), np.zeros(len(elsewhere))]
     D, taught_D = model.describe(X[tested]), model.describe(X[train])
@@ -95,7 +97,7 @@ def one_draw(X: np.ndarray, hsv: np.ndarray, scenes: np.ndarray, size: int, args
     )
     unknown = open_predict(model, X[tested])  # what the engine and `servant predict` go by
     # the background as an <elsewhere> class, scored on the untaught scenes it did not hold
-    with_back = make_recogniser("image", "fisher-bovw").fit(
+    with_back = make_recogniser("image", args.method).fit(
         X[train + back], np.r_[y, [ELSEWHERE] * len(back)]
     )
     near_tested = same_kind + far_half
@@ -123,6 +125,7 @@ def main() -> int:
     parser.add_argument(
         "--background", type=int, default=100, help="pictures of each background scene"
     )
+    parser.add_argument("--method", default="fisher-bovw", help="the picture method taught")
     args = parser.parse_args()
     root = args.data / "images" / "dev"
     if not root.is_dir():
@@ -131,11 +134,11 @@ def main() -> int:
     paths = sorted(p for folder in sorted(root.iterdir()) for p in sorted(folder.iterdir()))
     scenes = np.array([p.parent.name for p in paths])
     pictures = [read_picture(p) for p in paths]
-    X = make_recogniser("image", "fisher-bovw").featurize(pictures)
-    n_hsv = int(np.prod(make_recogniser("image", "fisher-bovw").hsv_bins))
-    hsv = np.sqrt(X[:, -n_hsv:].astype(np.float32))
+    X = make_recogniser("image", args.method).featurize(pictures)
+    hsv = np.sqrt(np.array([hsv_histogram(square_thumbnail(p)) for p in pictures]))
     print(
-        f"{len(paths)} pictures of {len(set(scenes))} scenes; {args.pictures} taught a place, "
+        f"{args.method}: {len(paths)} pictures of {len(set(scenes))} scenes; "
+        f"{args.pictures} taught a place, "
         f"{TESTED} tested a scene, {args.draws} draws a size; ROC AUC, taught kind against "
         "untaught (0.5: no better than chance): mean [lowest, highest draw]"
     )

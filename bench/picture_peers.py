@@ -8,7 +8,8 @@ stratified cross-validation inside the training pictures:
 - HOG + HSV + linear SVM: the gradient-orientation blocks of `features.descriptors` (8×8-pixel
   cells, 2×2-cell blocks, unit length: a small HOG) side by side with the HSV histogram; C by
   cross-validation;
-- Servant's `bovw`, `softbovw` and `fisher-bovw`, as `servant eval image --method M` runs them.
+- Servant's `bovw`, `softbovw`, `fisher-bovw` and `effnet`, as `servant eval image --method M`
+  runs them.
 
 What one 640×480 camera frame costs each of Servant's methods (features, probabilities,
 decision; median of 30) is given twice: wall time, and CPU time (`time.process_time`), which
@@ -54,7 +55,7 @@ from servant_core.features.descriptors import block_descriptors, hsv_histogram  
 from servant_core.library import SceneLibrary, read_pictures  # noqa: E402
 from servant_core.recognisers import make_recogniser  # noqa: E402
 
-SERVANT_METHODS = ("bovw", "softbovw", "fisher-bovw")
+SERVANT_METHODS = ("bovw", "softbovw", "fisher-bovw", "effnet")
 CV_FOLDS = 4
 LOG_EPS = 1e-15
 

@@ -19,7 +19,7 @@ MIN_WINDOW_SECONDS = 0.5
 MAX_WINDOW_SECONDS = 60.0
 
 ACOUSTIC_METHOD_NAMES = ("paper", "codebook", "kmeans-encoder", "birdnet")
-VISUAL_METHOD_NAMES = ("paper", "bovw", "softbovw", "fisher-bovw")
+VISUAL_METHOD_NAMES = ("paper", "bovw", "softbovw", "fisher-bovw", "effnet")
 # What a retrain fits for sound and pictures when there is no recogniser yet, and what `servant
 # train` and the demo use: the methods beyond the paper that lead on the wearer's walk and every
 # protocol (docs/research.md). A sample sense has one method (`senses.SAMPLE_METHOD`).

