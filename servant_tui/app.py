@@ -316,6 +316,9 @@ class ServantApp(App[None]):
             self._prompt = None
             skipped = scene is None and not prompt.withdrawn
             self._quiet_until = event.t + (PROMPT_AFTER_SKIP_S if skipped else PROMPT_EVERY_S)
+            if skipped:  # Escape or "Not now": the pane stops saying it is asking
+                self.live.scene.not_now(self._quiet_until)
+                self.log_line(event.t, f"Not now: no question before {clock(self._quiet_until)}")
             if scene:
                 self.label_unknown(prompt.event.window_id, scene)
 

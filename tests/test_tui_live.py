@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from pathlib import Path
 
 import pytest
 from rich.console import Console
@@ -85,6 +86,26 @@ async def test_unknown_place_prompts_and_labels(tmp_path):
         await settle(pilot, lambda: engine.labels)
         assert engine.labels == [("window-7", "Library")]
         assert not isinstance(app.screen, LabelPrompt)
+
+
+async def test_escape_on_the_question_is_not_now_and_the_scene_pane_says_so(tmp_path):
+    """Issue 39 item 12: Escape closed "What is this place?" and silenced it for five minutes
+    while the Scene pane kept saying "asked what it is"; the README called the button *skip*."""
+    engine = ReplayEngine(script=[UnknownScene(40.0, "audio", "street", "window-7")])
+    app = ServantApp(engine, library_root=tmp_path)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await settle(pilot, lambda: isinstance(app.screen, LabelPrompt))
+        await pilot.press("escape")
+        await settle(pilot, lambda: not isinstance(app.screen, LabelPrompt))
+        said = " ".join(str(text) for _, _, text in app.live.scene._rows())
+        assert "asked what it is" not in said
+        assert "Not now: not asking again before 05:40.0" in said, said
+        assert "Not now: no question before 05:40.0" in log_text(app)
+        engine.emit(UnknownScene(100.0, "audio", "street", "window-8"))  # within the 5 minutes
+        await pilot.pause()
+        assert not isinstance(app.screen, LabelPrompt) and engine.labels == []
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    assert "*Not now*" in readme and "*skip*" not in readme
 
 
 async def test_a_question_the_sound_has_answered_since_closes_by_itself(tmp_path):

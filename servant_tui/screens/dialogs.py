@@ -88,7 +88,7 @@ class LabelPrompt(ModalScreen[str | None]):
             yield Label(f"Servant {sense} a place it does not know (nearest: {nearest}).")
             yield Label("What is this place? The sample joins that scene in the library.")
             yield Input(
-                placeholder="scene name, e.g. CoffeeScene",
+                placeholder="scene name, e.g. cafe",
                 suggester=SuggestFromList(self.known_scenes, case_sensitive=False),
                 id="scene",
             )

@@ -87,6 +87,8 @@ class ScenePane(Static):
         # "What is this place?" asked since the last decision: the wearer is somewhere untaught,
         # so the last decision is history, not where the wearer is
         self.asked: UnknownScene | None = None
+        # the wearer said "Not now" (or pressed Escape): no question until this time (engine s)
+        self.quiet_until: float | None = None
         # the question was answered (the sense names a taught place again) and nothing has been
         # decided since: the last decision was made before the wearer left, so it stays history
         self.deciding = False
@@ -118,6 +120,17 @@ class ScenePane(Static):
             return
         self.update(self._render_state(), layout=False)
 
+    def not_now(self, until: float) -> None:
+        """The wearer put the question off: the pane says so, and until when, not "asked"."""
+        self.quiet_until = until
+        self.update(self._render_state(), layout=False)
+
+    def _question_text(self) -> str:
+        asked = self.asked
+        if asked is not None and self.quiet_until is not None and asked.t < self.quiet_until:
+            return f"Not now: not asking again before {clock(self.quiet_until)}"
+        return "asked what it is"
+
     def _render_state(self) -> Table:
         rows = self._rows()
         height = self.size.height
@@ -148,7 +161,7 @@ class ScenePane(Static):
         if self.asked is not None:
             # an untaught place: its question, and the last decision goes to the history
             rows.append(("decided", "decided", Text(UNKNOWN_PLACE, "magenta")))
-            rows.append(("average", "", Text("asked what it is", "magenta")))
+            rows.append(("average", "", Text(self._question_text(), "magenta")))
             history = list(self.decisions)
         elif last is None or self.deciding:
             rows.append(
