@@ -1,7 +1,8 @@
 """`servant run` (live devices) and `servant demo` (the synthesised walk), headless.
 
 They print the paper's terminal lines ("CoffeeScene detected") with their confidences, and what
-was heard and seen, as it happens; `--json` prints one JSON object per event instead. They stop
+was heard and seen, as it happens; a decision, the arm and an unknown place are said when they
+change, not at every window they hold. `--json` prints one JSON object per event instead. They stop
 on Ctrl-C or after `--duration` seconds of engine time. Without `--headless` the `servant` console
 script opens the terminal application instead (servant_tui intercepts these commands); if it does
 not, they run headless.
@@ -14,6 +15,7 @@ import dataclasses
 import json
 import sys
 import threading
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from servant_core.cli import reader_gone, terminal_text, write_line
@@ -220,7 +222,7 @@ def run_demo(args: argparse.Namespace) -> int:
             policy=args.policy,
         )
         if args.fast:
-            show = _Printer(args.json)
+            show = _Printer(args.json, engine.library_root)
             engine.subscribe(show)
             end = args.duration if args.duration is not None else 95.0
             while not show.gone.is_set():  # a second at a time, to stop once the reader has gone
@@ -236,7 +238,7 @@ def run_demo(args: argparse.Namespace) -> int:
 def _run(engine: Engine, args: argparse.Namespace) -> int:
     if not args.headless:
         print("servant: the terminal UI is not attached here; running headless", file=sys.stderr)
-    show = _Printer(args.json)
+    show = _Printer(args.json, engine.library_root)
     engine.subscribe(show)
     engine.start()
     try:
@@ -255,8 +257,9 @@ class _Printer:
     reader has gone, `| head -n 5`, or its disk is full), which ends the run (the arm disarmed
     as at any end), not a traceback for every event after."""
 
-    def __init__(self, as_json: bool) -> None:
+    def __init__(self, as_json: bool, library: Path | None = None) -> None:
         self.as_json = as_json
+        self.lines = _Lines(library)
         self.gone = threading.Event()
         self.failed = False  # gone because the output failed, not because its reader left
 
@@ -267,7 +270,7 @@ class _Printer:
         return 2 if self.failed else reader_gone()
 
     def __call__(self, event: Event) -> None:
-        text = _event_json(event) if self.as_json else _event_line(event)
+        text = _event_json(event) if self.as_json else self.lines(event)
         if text is None or self.gone.is_set():
             return
         try:
@@ -283,6 +286,86 @@ class _Printer:
 
 def _printer(as_json: bool) -> Any:
     return _Printer(as_json)
+
+
+class _Lines:
+    """The lines of a headless run: `_event_line`, except that a state that holds is said when it
+    begins, not at every window it holds (the decided place, the arm standing still, an unknown
+    place). The first unknown place says what it is and how to teach it; a run at one place for
+    an hour is a handful of lines, not thousands."""
+
+    def __init__(self, library: Path | None = None) -> None:
+        self.library = library
+        self._decided: tuple[str | None, ...] = ()  # the last decision said: (scene,)
+        self._arm = ""  # the arm's last line, without its time
+        self._unknown: set[str] = set()  # the senses whose unknown place was said and holds
+        self._taught_how = False
+        self._lock = threading.Lock()  # events come from the senses' and the arm's threads
+
+    def __call__(self, event: Event) -> str | None:
+        from servant_core.event_text import arm_text
+        from servant_core.events import ArmState, Decision, UnknownScene
+
+        line = _event_line(event)
+        with self._lock:
+            if line is None or not self._new(event):
+                return None
+            if isinstance(event, Decision):
+                self._decided = (event.scene,)
+            elif isinstance(event, ArmState):
+                self._arm = arm_text(event)
+            elif isinstance(event, UnknownScene):
+                self._unknown.add(event.sense)
+                if not self._taught_how:
+                    self._taught_how = True
+                    return f"[{event.t:7.2f}] {self._how_to_teach(event)}"
+        return line
+
+    def _new(self, event: Event) -> bool:
+        """Whether `event` says something the lines have not said yet (under `_lock`)."""
+        from servant_core.event_text import arm_text
+        from servant_core.events import (
+            AcousticPrediction,
+            ArmState,
+            Decision,
+            SensePrediction,
+            UnknownScene,
+            VisualPrediction,
+        )
+
+        if isinstance(event, Decision):
+            return self._decided != (event.scene,)
+        if isinstance(event, ArmState):
+            return event.pose_of is not None or arm_text(event) != self._arm
+        if isinstance(event, UnknownScene):
+            return event.sense not in self._unknown
+        if isinstance(event, (AcousticPrediction, VisualPrediction, SensePrediction)):
+            if event.scene is not None:  # a known place: the next unknown one is news again
+                self._unknown.discard(_sense_of(event))
+        return True
+
+    def _how_to_teach(self, event: Any) -> str:
+        """The first unknown place's line: what its id is, and how to teach the place."""
+        from servant_core.event_text import place
+        from servant_core.storage import data_dir
+
+        # where the engine writes the places it is told (`Engine.label_unknown`)
+        library = self.library or data_dir() / "library"
+        nearest = f", nearest: {place(event.nearest_scene)}" if event.nearest_scene else ""
+        return (
+            f"{event.window_id}: a place Servant was not taught ({event.sense}{nearest}); to teach "
+            f"it, run `servant` there (teach mode, key t), or put recordings and pictures of it in "
+            f"{library}/<name>/ and run `servant train {library} --force`"
+        )
+
+
+def _sense_of(prediction: Any) -> str:
+    """The sense a prediction is of, by the name `UnknownScene.sense` gives it."""
+    from servant_core.events import AcousticPrediction, VisualPrediction
+
+    if isinstance(prediction, AcousticPrediction):
+        return "audio"
+    return "image" if isinstance(prediction, VisualPrediction) else str(prediction.sense)
 
 
 def _event_line(event: Event) -> str | None:
@@ -320,7 +403,8 @@ def _event_line(event: Event) -> str | None:
         confidence = confidence_text(event.confidence, event.confidence_unit)
         return f"{at} felt ({event.sense}) {place(event.scene)}  confidence {confidence}"
     if isinstance(event, UnknownScene):
-        return f"{at} unknown {event.sense} ({event.window_id}), nearest: {event.nearest_scene}"
+        nearest = f", nearest: {place(event.nearest_scene)}" if event.nearest_scene else ""
+        return f"{at} {event.window_id}: {place(None)} again ({event.sense}{nearest})"
     if isinstance(event, DeviceStatus):
         return f"{at} {event.device} {'ok' if event.ok else 'PROBLEM'}: {event.message}"
     if isinstance(event, ErrorEvent):

@@ -15,13 +15,23 @@ from typing import Any
 
 from servant_core.engine.bus import EventBus
 from servant_core.errors import ServantError
+from servant_core.event_text import place
 from servant_core.events import ArmState, Notice
 from servant_core.fusion.elsewhere import place_probability
+from servant_core.servo.calibration import clamp_pose
 
 Pose = Mapping[str, float]
 PoseFor = Callable[[str, dict[str, dict[str, float]], float], Pose | None]
 
 NO_POSE = "arm: no pose taught yet, so it stays put; teach one in teach mode (key t), then Train"
+
+
+def no_pose_for(scene: str) -> str:
+    """What a decided place without a taught pose means for the arm, and how to teach one."""
+    return (
+        f"arm: no pose was taught for {place(scene)}, so the arm stays put there; teach one with "
+        "`servant teach` (then run again) or in the app's teach mode (key t)"
+    )
 
 
 class ArmControl:
@@ -32,10 +42,24 @@ class ArmControl:
         self.reopen_seconds = reopen_seconds
         self.link: Any = None
         self.why_none = "servo: no arm attached; connect one with `servant servo` first"
-        self.pose_for: PoseFor | None = None
+        self._pose_for: PoseFor | None = None
         self._spec: tuple[Any, ...] | None = None  # (port, protocol, joints) of `connect`
         self._pool: ThreadPoolExecutor | None = None
         self._checked_at = 0.0
+        # what was said about a place without a pose (or about no pose at all, ""): said once,
+        # not at every window the place stays decided
+        self._told: set[str] = set()
+        self._holds: str | None = None  # the place whose pose the arm took last
+
+    @property
+    def pose_for(self) -> PoseFor | None:
+        return self._pose_for
+
+    @pose_for.setter
+    def pose_for(self, pose_for: PoseFor | None) -> None:
+        # a new action learner may know poses the last did not: what it lacks is said again
+        self._pose_for = pose_for
+        self._told.clear()
 
     # --- life cycle ---------------------------------------------------------------------------
 
@@ -108,6 +132,8 @@ class ArmControl:
         if self.link is None:
             raise ServantError(self.why_none)
         self.link.arm()
+        self._told.clear()
+        self._holds = None  # armed anew, the arm goes to the next place's pose
         self.emit_state()
 
     def read_pose(self) -> dict[str, float]:
@@ -157,7 +183,7 @@ class ArmControl:
         if link is None or not link.armed:
             return
         if pose_for is None:
-            self.bus.emit(Notice(self.bus.clock(), NO_POSE))
+            self._tell("", NO_POSE)
             return
         if sure is None:
             sure = place_probability(scene, scores, senses, open_senses)
@@ -177,11 +203,17 @@ class ArmControl:
             self.bus.error(str(error))
             return
         if pose is None:
+            self._tell(scene, no_pose_for(scene))
             return
         if pool is None:  # run_until: no thread pool, send on this thread
             self._move(link, scene, dict(pose))
         else:
             pool.submit(self._move, link, scene, dict(pose))
+
+    def _tell(self, about: str, message: str) -> None:
+        if about not in self._told:
+            self._told.add(about)
+            self.bus.emit(Notice(self.bus.clock(), message))
 
     def check(self, t: float) -> None:
         """Every `reopen_seconds`, ask an armed arm where it is (on the arm's thread): a
@@ -204,6 +236,13 @@ class ArmControl:
         # On its own thread: a rate-limited move takes seconds and must not hold up the senses.
         moved = False
         try:
+            if link.armed and _stands_at(link, pose):
+                # the pose is where the arm already is: nothing to send, and nothing new to say
+                # unless it now stands for another place
+                if self._holds != scene:
+                    self._holds = scene
+                    self.bus.emit(Notice(self.bus.clock(), f"arm holds {place(scene)}'s pose"))
+                return
             if link.armed:
                 before = dict(link.commanded)
                 link.move_to(pose)
@@ -214,7 +253,16 @@ class ArmControl:
             self.bus.report("servo", False, str(error))
         except Exception as exc:
             self.bus.report("servo", False, f"servo: move failed ({type(exc).__name__}: {exc})")
+        if moved:
+            self._holds = scene
         self.emit_state(scene if moved else None)
+
+
+def _stands_at(link: Any, pose: dict[str, float]) -> bool:
+    """Whether the arm stands at `pose` (within the limits, as the link would aim) already: a
+    pose sent again at every window the place stays decided only fills the serial line."""
+    aimed, _ = clamp_pose(link.joints, pose)
+    return link.at_goal and not _went(link.commanded, aimed)
 
 
 def _went(before: dict[str, float], after: dict[str, float]) -> bool:

@@ -159,9 +159,13 @@ def pose_for_taught(learner: Any) -> PoseFor:
     senses' raw scores: those are never one-hot, and a wearer who taught "cup at chest height"
     for the café wants that pose, not a blend with the street's. The engine has applied the
     confidence threshold of the settings (which the user may change while it runs) before it
-    asks, so the learner's own, fixed when it was trained, is not applied a second time."""
+    asks, so the learner's own, fixed when it was trained, is not applied a second time. A
+    place it was never taught a pose for (one named by its answer to "What is this place?") has
+    none: None, which the engine says once."""
 
-    def pose_for(scene: str, scores: dict[str, dict[str, float]], confidence: float) -> Pose:
+    def pose_for(scene: str, scores: dict[str, dict[str, float]], confidence: float) -> Pose | None:
+        if scene not in getattr(learner, "taught_scenes_", (scene,)):
+            return None
         return learner.pose_for(scene, None, 100.0)
 
     return pose_for
