@@ -114,10 +114,12 @@ class WalkCamera:
 
 
 class RecordingLink:
-    """Stands in for the servo link: always armed, keeps each pose it is sent with the time."""
+    """Stands in for the servo link: always armed, keeps each pose it is sent with the time.
+    It is never "at its goal", so the engine sends it the decided place's pose at every window
+    (a real arm standing at that pose is sent nothing): each window's decision is recorded."""
 
     armed = True
-    at_goal = True  # it gets where it is sent at once
+    at_goal = False
 
     def __init__(self, clock: ManualClock) -> None:
         self.clock = clock

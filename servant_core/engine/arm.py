@@ -261,8 +261,10 @@ class ArmControl:
 def _stands_at(link: Any, pose: dict[str, float]) -> bool:
     """Whether the arm stands at `pose` (within the limits, as the link would aim) already: a
     pose sent again at every window the place stays decided only fills the serial line."""
+    if not link.at_goal:
+        return False
     aimed, _ = clamp_pose(link.joints, pose)
-    return link.at_goal and not _went(link.commanded, aimed)
+    return not _went(link.commanded, aimed)
 
 
 def _went(before: dict[str, float], after: dict[str, float]) -> bool:
