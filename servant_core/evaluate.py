@@ -534,9 +534,12 @@ def evaluate_audio(
 
 
 def _pictures_and_features(
-    model: Recogniser, pictures: Sequence[Picture], on_error: Callable[[ServantError], None] | None
+    model: Recogniser,
+    pictures: Sequence[Picture],
+    on_error: Callable[[ServantError], None] | None,
+    on_progress: Callable[[int, int], None] | None = None,
 ) -> tuple[np.ndarray, list[Picture]]:
-    images, kept = read_pictures(pictures, on_error)
+    images, kept = read_pictures(pictures, on_error, on_progress)
     if not kept:
         raise ServantError("no readable picture")
     return model.featurize(images), kept
@@ -627,18 +630,22 @@ def fit_paired(
     visual_method: str,
     on_error: Callable[[ServantError], None] | None,
     train_on_all: bool = False,
+    on_progress: Callable[[str], Callable[[int, int], None]] | None = None,
 ) -> PairedFit:
     """The acoustic recogniser trained on the temporal split of the library's windows, the visual
     one on the file-order split of its pictures; on all of both with `train_on_all` (when the
-    test items come from another library)."""
+    test items come from another library). `on_progress(step)` gives the callback of each step
+    ("listening to recordings", "reading pictures")."""
     audio = make_audio_recogniser(acoustic_method)
-    wf = featurize_library_audio(library, audio, on_error)
+    heard = on_progress("listening to recordings") if on_progress else None
+    wf = featurize_library_audio(library, audio, on_error, heard)
     train = (
         np.ones(len(wf.scenes), bool) if train_on_all else temporal_split(wf.recording, wf.position)
     )
     fit_visits(audio, wf.features[train], wf.scenes[train], visits_of(wf)[train])
     visual = make_recogniser("image", visual_method)
-    X, kept = _pictures_and_features(visual, library.pictures, on_error)
+    seen = on_progress("reading pictures") if on_progress else None
+    X, kept = _pictures_and_features(visual, library.pictures, on_error, seen)
     p_train = (
         np.ones(len(kept), bool) if train_on_all else file_order_split(kept, IMAGE_TRAIN_FRACTION)
     )
@@ -908,28 +915,40 @@ def _first_test_items(
     scenes: Sequence[str],
     rate: int,
     seconds: float,
-) -> tuple[dict[str, np.ndarray], dict[str, Picture]]:
-    """One test window and one test picture per scene. Without a test library they are held out
-    of `library`: a window after the temporal split point, a picture after the file-order split."""
+    on_error: Callable[[ServantError], None] | None = None,
+) -> tuple[dict[str, np.ndarray], dict[str, tuple[Picture, np.ndarray]]]:
+    """One test window and one test picture (with its pixels) per scene. Without a test library
+    they are held out of `library`: a window after the temporal split point, a picture after the
+    file-order split. A file that cannot be read goes to `on_error` (which may raise) and the
+    next one is taken."""
     windows: dict[str, np.ndarray] = {}
-    pictures: dict[str, Picture] = {}
+    pictures: dict[str, tuple[Picture, np.ndarray]] = {}
     source = test_library if test_library is not None else library
     for scene in scenes:
         recs = [r for r in source.recordings if r.scene == scene]
-        for _, _, w in iter_recording_windows(recs[:1], rate, seconds):
+        for _, _, w in iter_recording_windows(recs, rate, seconds, on_error):
             index = (
                 0
                 if test_library is not None
                 else min(max(int(math.floor(TRAIN_FRACTION * len(w))), 1), len(w) - 1)
             )
             windows[scene] = w[index : index + 1]
+            break  # the first readable recording
         pics = sorted((p for p in source.pictures if p.scene == scene), key=lambda p: p.path.name)
         index = (
             0
             if test_library is not None
             else min(max(int(math.floor(IMAGE_TRAIN_FRACTION * len(pics))), 1), len(pics) - 1)
         )
-        pictures[scene] = pics[index]
+        for picture in pics[index:]:
+            images, kept = read_pictures([picture], on_error)
+            if kept:
+                pictures[scene] = (picture, images[0])
+                break
+        if scene not in windows or scene not in pictures:
+            raise ServantError(
+                f"{source.root}: {scene}: no readable recording or picture left to test on"
+            )
     return windows, pictures
 
 
@@ -940,14 +959,21 @@ def paper_tables(
     visual_method: str = "paper",
     config: FusionConfig | None = None,
     on_error: Callable[[ServantError], None] | None = None,
+    on_progress: Callable[[str], Callable[[int, int], None]] | None = None,
 ) -> dict[str, Any]:
     """The paper's Table I (terminal line per picture × recording) and Table II (average
-    confidence per cell, 0.000 where no scene), for every scene with recordings and pictures."""
+    confidence per cell, 0.000 where no scene), for every scene with recordings and pictures;
+    `on_progress` as `fit_paired`'s."""
     config = config or FusionConfig()
     paired = _paired_scenes(library, test_library, "the tables need")
     library = library.restricted(paired)
     fitted = fit_paired(
-        library, acoustic_method, visual_method, on_error, train_on_all=test_library is not None
+        library,
+        acoustic_method,
+        visual_method,
+        on_error,
+        train_on_all=test_library is not None,
+        on_progress=on_progress,
     )
     audio, visual = fitted.audio, fitted.visual
 
@@ -957,11 +983,11 @@ def paper_tables(
         paired,
         audio.rate,
         audio.window_seconds,
+        on_error,
     )
     cells: dict[str, dict[str, dict[str, Any]]] = {}
     for picture_scene in paired:
-        images, _ = read_pictures([pictures[picture_scene]])
-        Xv = visual.featurize(images)
+        Xv = visual.featurize([pictures[picture_scene][1]])
         v = (str(visual.predict(Xv)[0]), float(visual.confidence(Xv)[0]))
         cells[picture_scene] = {}
         for recording_scene in paired:
@@ -978,7 +1004,8 @@ def paper_tables(
         "scenes": paired,
         "acoustic_method": acoustic_method,
         "visual_method": visual_method,
-        "pictures": {s: str(p.path) for s, p in pictures.items()},
+        "confidence_units": {"acoustic": audio.confidence_unit, "visual": visual.confidence_unit},
+        "pictures": {s: str(p.path) for s, (p, _) in pictures.items()},
         "cells": cells,
     }
 
@@ -995,7 +1022,29 @@ def format_tables(tables: dict[str, Any]) -> str:
         fmt = "  ".join(f"{{:<{w}}}" for w in widths)
         return [title, fmt.format(*head), *(fmt.format(*row) for row in rows)]
 
-    lines = grid("Table I: terminal output", lambda c: c["line"])
+    lines = [_tables_header(tables), ""]
+    lines += grid("Table I: terminal output", lambda c: c["line"])
     lines.append("")
-    lines += grid("Table II: average confidence", lambda c: f"{c['confidence']:.3f}")
+    units = list(tables.get("confidence_units", {}).values())
+    unit = "%" if set(units) == {"%"} else f"mean of {' and '.join(map(str, units))}"
+    title = f"Table II: average confidence ({unit})" if units else "Table II: average confidence"
+    lines += grid(title, lambda c: f"{c['confidence']:.3f}")
     return "\n".join(lines)
+
+
+def _tables_header(tables: dict[str, Any]) -> str:
+    """What the tables are of: the methods, and the unit of their confidences."""
+    audio, image = tables["acoustic_method"], tables["visual_method"]
+    units = tables.get("confidence_units", {})
+    if (audio, image) == ("paper", "paper"):
+        return (
+            "The paper's method (its Tables I and II): sound by K-Means on FFT windows, pictures "
+            "by dominant colours, decided by its sequential 30 s / 20 s rule. Confidences are "
+            "the mean of its eq. 1 (sound: 100 - distance / 10000) and eq. 2 (pictures: 100 - "
+            "distance), not percentages: far below zero is usual."
+        )
+    said = ", ".join(f"{sense} {unit}" for sense, unit in units.items()) or "not said"
+    return (
+        f"Tables I and II as the paper's, with sound by `{audio}` and pictures by `{image}`, "
+        f"decided by the paper's sequential rule; confidences: {said}."
+    )

@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, cast
 
@@ -71,6 +72,17 @@ def _warn(error: ServantError) -> None:
     print(f"servant: warning: skipped {one_line(str(error))}", file=sys.stderr)
 
 
+def _stop(error: ServantError) -> None:
+    raise ServantError(f"{error}; or add --skip-bad to leave such files out, each with a warning")
+
+
+def _on_bad_file(args: argparse.Namespace) -> Callable[[ServantError], None]:
+    """What every command that reads a library does with a file it cannot read: stop, naming the
+    file and `--skip-bad` (a model or a figure quietly made without it may mislead), or with
+    `--skip-bad` leave it out, warning."""
+    return _warn if args.skip_bad else _stop
+
+
 def _library(root: Path, scenes: str | None) -> SceneLibrary:
     library = SceneLibrary.scan(root)
     return (
@@ -96,7 +108,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         )
     stamp = file_stamp(output)
     library = SceneLibrary.scan(args.root)
-    on_error = _warn if args.skip_bad else None
+    on_error = _on_bad_file(args)
     recognisers: dict[str, Recogniser] = {}
     summary: dict[str, Any] = {"root": str(args.root), "warnings": []}
     if len({r.scene for r in library.recordings}) >= 2:
@@ -141,11 +153,11 @@ def cmd_train(args: argparse.Namespace) -> int:
                 stream or sense,
                 make_recogniser(sense, FRESH_METHODS[sense]),
                 args.window,
-                on_error or _raise,
+                on_error,
                 Progress(f"reading {sense} logs"),
             )
         except ServantError as error:
-            if on_error is None:
+            if not args.skip_bad:
                 raise
             # e.g. the bad log was a scene's only one: this sense is left out, the others train
             on_error(ServantError(f"{sense}: not trained: {error}"))
@@ -161,7 +173,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     fusion = None
     if args.learned_fusion:
         by_sense = {ROLE_SENSE[role]: model for role, model in recognisers.items()}
-        fusion, reason = library_fusion_net(library, by_sense, args.window, on_error or _raise)
+        fusion, reason = library_fusion_net(library, by_sense, args.window, on_error)
         summary["fusion"] = (
             {"senses": fusion.senses_, "scenes": fusion.scenes_, "threshold": fusion.threshold_}
             if fusion is not None
@@ -198,10 +210,6 @@ def cmd_train(args: argparse.Namespace) -> int:
 def _names(scenes: list[str]) -> str:
     """Places as one line, a folder's name holding a newline or an escape shown escaped."""
     return ", ".join(printable_name(scene) for scene in scenes)
-
-
-def _raise(error: ServantError) -> None:
-    raise error
 
 
 def cmd_predict(args: argparse.Namespace) -> int:
@@ -418,7 +426,7 @@ def cmd_eval_audio(args: argparse.Namespace) -> int:
         args.method,
         args.protocol,
         _audio_params(args),
-        _warn,
+        _on_bad_file(args),
         Progress("listening to recordings"),
         test_library=test,
         shots=args.shots,
@@ -483,7 +491,7 @@ def cmd_eval_image(args: argparse.Namespace) -> int:
         test,
         args.method,
         args.split,
-        on_error=_warn,
+        on_error=_on_bad_file(args),
         seeds=args.seeds,
     )
     emit(args, result, _format_scores(result))
@@ -497,7 +505,7 @@ def cmd_eval_fusion(args: argparse.Namespace) -> int:
         args.image_method,
         args.policy,
         _fusion_config(args),
-        _warn,
+        _on_bad_file(args),
         drop_sense=args.drop_sense,
         seeds=args.seeds,
     )
@@ -528,7 +536,8 @@ def cmd_table(args: argparse.Namespace) -> int:
         test,
         args.audio_method,
         args.image_method,
-        on_error=_warn,
+        on_error=_on_bad_file(args),
+        on_progress=Progress,
     )
     emit(args, tables, format_tables(tables))
     return 0

@@ -44,11 +44,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     _method_options(train)
     _audio_options(train)
-    train.add_argument(
-        "--skip-bad",
-        action="store_true",
-        help="skip unreadable or damaged files (with a warning) instead of stopping",
-    )
+    _skip_bad_option(train)
     train.add_argument(
         "--learned-fusion",
         action="store_true",
@@ -118,6 +114,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     _seeds_option(audio)
     _audio_options(audio)
+    _skip_bad_option(audio)
     _json_option(audio)
     audio.set_defaults(handler=later(COMMANDS, "cmd_eval_audio"))
     image = senses.add_parser("image", help="visual recognition: train library vs test library")
@@ -139,6 +136,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     image.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
     _seeds_option(image)
+    _skip_bad_option(image)
     _json_option(image)
     image.set_defaults(handler=later(COMMANDS, "cmd_eval_image"))
     fusion = senses.add_parser("fusion", help="fused decisions over paired windows and pictures")
@@ -152,6 +150,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="withhold this sense at test time (a broken microphone or camera)",
     )
     _seeds_option(fusion)
+    _skip_bad_option(fusion)
     _json_option(fusion)
     fusion.set_defaults(handler=later(COMMANDS, "cmd_eval_fusion"))
 
@@ -162,12 +161,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--scenes", help="comma-separated scenes (default: all with sound and pictures)"
     )
     _method_options(table, paper=True)
+    _skip_bad_option(table)
     _json_option(table)
     table.set_defaults(handler=later(COMMANDS, "cmd_table"))
 
 
 def _json_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print JSON instead of text")
+
+
+def _skip_bad_option(parser: argparse.ArgumentParser) -> None:
+    # one rule for every command that reads a library: a damaged file stops it, by default
+    parser.add_argument(
+        "--skip-bad",
+        action="store_true",
+        help="skip unreadable or damaged files (with a warning) instead of stopping",
+    )
 
 
 def _method_options(parser: argparse.ArgumentParser, paper: bool = False) -> None:
