@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 from rich.markup import escape
 from textual import on, work
@@ -36,16 +36,43 @@ from servant_tui.screens.live import LiveScreen, device_message
 from servant_tui.widgets.scene import heard_by, leaned_text
 from servant_tui.widgets.text import clock, error_text
 
+if TYPE_CHECKING:
+    import numpy as np
 
+    from servant_core.library import SceneLibrary
+
+
+@runtime_checkable
 class EngineLike(Protocol):
     """What the application asks of the engine (`servant_core.engine.Engine` or a test replay)."""
+
+    library_root: Path | None  # where teach mode and the Library screen keep the scenes
+    model_path: Path | None  # where a retrain or a label saves the model (None: not saved)
+    user_settings: Any  # the settings it runs on (`servant_core.settings.Settings`), or None
+    # its sound and picture recognisers (their `scenes_` and `method`), None before one is fitted
+    acoustic: Any
+    visual: Any
+
+    @property
+    def audio_rate(self) -> int: ...
+    @property
+    def sample_senses(self) -> list[str]: ...
 
     def subscribe(self, callback: Callable[[Any], None]) -> Any: ...
     def start(self) -> None: ...
     def stop(self) -> None: ...
     def arm(self) -> None: ...
     def disarm(self) -> None: ...
-    def label_unknown(self, window_id: str, scene: str) -> None: ...
+    def label_unknown(self, window_id: str, scene: str) -> Any: ...
+    def apply_settings(self, settings: Any) -> None: ...
+    def set_action_learner(self, pose_for: Any) -> None: ...
+    def read_arm_pose(self) -> dict[str, float]: ...
+    def record_window(self, seconds: float) -> np.ndarray: ...
+    def record_samples(
+        self, sense: str, seconds: float, timeout: float | None
+    ) -> tuple[np.ndarray, int]: ...
+    def take_picture(self) -> np.ndarray: ...
+    def retrain(self, library: SceneLibrary) -> Any: ...
 
 
 def default_library_root() -> Path:
@@ -109,15 +136,13 @@ class ServantApp(App[None]):
         super().__init__()
         self.engine = engine
         self.sub_title = "demo scenes" if mode == "demo" else "live devices"
-        self.library_root = (
-            library_root or getattr(engine, "library_root", None) or default_library_root()
-        )
+        self.library_root = library_root or engine.library_root or default_library_root()
         # the settings the engine runs on (with `servant run`'s overrides), else loaded from the
         # file by the first screen that needs them
-        self._settings = settings or getattr(engine, "user_settings", None)
+        self._settings = settings or engine.user_settings
         self.arm_state: ArmState | None = None
         self.seen_scenes: set[str] = set()
-        self.live = LiveScreen(sample_senses=getattr(engine, "sample_senses", ()))
+        self.live = LiveScreen(sample_senses=engine.sample_senses)
         self._prompt: LabelPrompt | None = None  # the open "What is this place?"
         self._quiet_until: float | None = None  # engine time before which no place is asked about
         self._deferred = False  # an unknown place was met behind another screen, and logged
@@ -135,7 +160,7 @@ class ServantApp(App[None]):
     @settings.setter
     def settings(self, value: Any) -> None:
         self._settings = value
-        if value is not None and hasattr(self.engine, "apply_settings"):
+        if value is not None:
             self.apply_settings(value)
 
     @work(thread=True, exclusive=True, group="apply-settings", exit_on_error=False)
@@ -146,18 +171,17 @@ class ServantApp(App[None]):
     def known_scenes(self) -> set[str]:
         """The scenes the engine's recognisers know, and any it was heard or seen to name."""
         known = set(self.seen_scenes)
-        for role in ("acoustic", "visual"):
-            known.update(str(s) for s in getattr(getattr(self.engine, role, None), "scenes_", []))
+        for recogniser in (self.engine.acoustic, self.engine.visual):
+            known.update(str(s) for s in getattr(recogniser, "scenes_", []))
         return known
 
     @on(TrainingDone)
     def _use_taught_poses(self, message: TrainingDone) -> None:
         """Teach mode trained the action learner: the arm acts on its poses from now on."""
-        attach = getattr(self.engine, "set_action_learner", None)
-        if attach is not None and message.learner is not None:
+        if message.learner is not None:
             from servant_core.engine import pose_for_taught
 
-            attach(pose_for_taught(message.learner))
+            self.engine.set_action_learner(pose_for_taught(message.learner))
 
     # -- the engine side -------------------------------------------------------------------------
 
@@ -348,7 +372,7 @@ class ServantApp(App[None]):
     @work(thread=True, group="label", exit_on_error=False)
     def label_unknown(self, window_id: str, scene: str) -> None:
         self.engine.label_unknown(window_id, scene)
-        saved = getattr(self.engine, "model_path", None)
+        saved = self.engine.model_path
         where = f"; model saved to {escape(str(saved))}" if saved else " (kept until you quit)"
         self.call_from_thread(
             self.log_line, None, f"labelled the unknown place as {escape(scene)}{where}"

@@ -17,6 +17,8 @@ if TYPE_CHECKING:
     import argparse
     from collections.abc import Callable, Sequence
 
+    from servant_tui.app import EngineLike
+
 INTERRUPTED = 130  # the shell's status for a command ended by SIGINT
 INTERRUPT_AGAIN_S = 0.05  # Ctrl-C that Python ignored is raised again this much later
 
@@ -28,7 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
     return build_core_parser()
 
 
-def run_tui(engine_factory: Callable[[], Any], mode: str) -> int:
+def run_tui(engine_factory: Callable[[], EngineLike], mode: str) -> int:
     from servant_core.errors import ServantError
     from servant_tui.app import ServantApp
     from servant_tui.heap import release_free_heap

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -163,6 +164,15 @@ class ReplayEngine:
         self.pictures_taken = 0
         self.t = 0.0
         self._arm: ArmState | None = None
+        # what the app reads of `servant_core.engine.Engine`: a replay keeps no library or model,
+        # runs on no settings of its own and has no recognisers
+        self.library_root: Path | None = None
+        self.model_path: Path | None = None
+        self.user_settings: Any = None
+        self.acoustic: Any = None
+        self.visual: Any = None
+        self.settings_applied: list[Any] = []
+        self.pose_for: Any = None
 
     @property
     def sample_senses(self) -> list[str]:
@@ -207,6 +217,20 @@ class ReplayEngine:
 
     def label_unknown(self, window_id: str, scene: str) -> None:
         self.labels.append((window_id, scene))
+
+    def apply_settings(self, settings: Any) -> None:
+        self.settings_applied.append(settings)
+
+    def set_action_learner(self, pose_for: Any) -> None:
+        self.pose_for = pose_for
+
+    def read_arm_pose(self) -> dict[str, float]:
+        raise ServantError("arm: this engine cannot read the arm's pose; type the angles")
+
+    def record_samples(
+        self, sense: str, seconds: float, timeout: float | None = None
+    ) -> tuple[np.ndarray, int]:
+        raise ServantError(f"{sense}: no readings to record in this replay")
 
     def record_window(self, seconds: float) -> np.ndarray:
         """The next `seconds` of the replayed source (a recording the test hands in)."""

@@ -11,7 +11,6 @@ from textual import on, work
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
-from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Header, Static
 
 from servant_core.engine.learning import retrained_text
@@ -56,7 +55,7 @@ def evaluation_table(result: dict) -> Table:
     return table
 
 
-class LibraryScreen(ReportsWorkerErrors, Screen[None]):
+class LibraryScreen(ReportsWorkerErrors):
     BINDINGS = [
         Binding("escape", "app.pop_screen", "Back"),
         Binding("d", "delete", "Delete"),
@@ -144,7 +143,8 @@ class LibraryScreen(ReportsWorkerErrors, Screen[None]):
         samples = self.query_one("#samples", DataTable)
         if samples.row_count == 0:
             return None
-        return Path(samples.coordinate_to_cell_key(samples.cursor_coordinate).row_key.value)
+        key = samples.coordinate_to_cell_key(samples.cursor_coordinate).row_key.value
+        return None if key is None else Path(key)  # each row is keyed by its file's path
 
     def action_delete(self) -> None:
         path = self.selected_sample()
@@ -209,7 +209,7 @@ class LibraryScreen(ReportsWorkerErrors, Screen[None]):
     def retrain(self, on_progress: OnProgress) -> None:
         library = SceneLibrary.scan(self.root)
         senses = with_progress(self.app.engine.retrain, library, on_progress)
-        saved = getattr(self.app.engine, "model_path", None)
+        saved = self.app.engine.model_path
         self.post_message(
             RetrainDone(
                 retrained_text(senses, library) + (f"; model saved to {saved}" if saved else "")
@@ -230,7 +230,7 @@ class LibraryScreen(ReportsWorkerErrors, Screen[None]):
     def evaluate(self, on_progress: OnProgress) -> None:
         library = SceneLibrary.scan(self.root)
         # the method the engine listens with (a first start: the one a retrain would fit)
-        method = getattr(getattr(self.app.engine, "acoustic", None), "method", None)
+        method = getattr(self.app.engine.acoustic, "method", None)
         result = with_progress(
             evaluate_audio,
             library,

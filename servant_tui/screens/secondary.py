@@ -11,14 +11,19 @@ from __future__ import annotations
 import dataclasses
 import inspect
 from collections.abc import Callable, Iterator
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from textual import getters
 from textual.binding import Binding
+from textual.screen import Screen
 from textual.worker import Worker, WorkerState
 
 from servant_core.library import SceneLibrary
 from servant_tui.heap import release_free_heap
 from servant_tui.widgets.progress import OnProgress
+
+if TYPE_CHECKING:
+    from servant_tui.app import ServantApp
 
 # The app's help and quit, listed again so a screen's footer shows them right after its own keys;
 # the app's other keys work here too but are not listed (at 80 columns the footer has room for a
@@ -33,11 +38,19 @@ HELP_AND_QUIT = [
 ]
 
 
-class ReportsWorkerErrors:
-    """Mixin for a screen: a worker of group G that fails calls `work_failed(G, error)`, which
-    says so in the screen (its status line) after the app has logged and notified it."""
+class ServantScreen(Screen[None]):
+    """A screen of the `ServantApp`, which the type checker knows `self.app` to be (its engine,
+    settings, log). For the type checker only: at run time `app` is Textual's own property, so a
+    test may still show the screen in an app of its own."""
 
-    app: Any
+    if TYPE_CHECKING:
+        app = getters.app(ServantApp)
+
+
+class ReportsWorkerErrors(ServantScreen):
+    """A screen whose workers' failures reach the user: a worker of group G that fails calls
+    `work_failed(G, error)`, which says so in the screen (its status line) after the app has
+    logged and notified it."""
 
     def on_worker_state_changed(self, event: Worker.StateChanged) -> None:
         if event.state == WorkerState.ERROR and event.worker.error is not None:

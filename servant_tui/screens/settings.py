@@ -9,12 +9,11 @@ from textual import on
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Grid, Horizontal, VerticalScroll
-from textual.screen import Screen
 from textual.widgets import Button, Footer, Header, Input, Label, Select, Static
 
 from servant_core.errors import ServantError
 from servant_tui.screens.dialogs import UnsavedChanges
-from servant_tui.screens.secondary import HELP_AND_QUIT
+from servant_tui.screens.secondary import HELP_AND_QUIT, ServantScreen
 
 DEVICE_FIELDS = (
     ("audio_device", "audio input", "sounddevice name or index; empty: the default input"),
@@ -57,7 +56,7 @@ def number(text: str, what: str, kind: type = float) -> Any:
         raise ServantError(f"{what}: {text!r} is not {words}; type one") from None
 
 
-class SettingsScreen(Screen[None]):
+class SettingsScreen(ServantScreen):
     BINDINGS = [
         Binding("escape", "back", "Back"),
         Binding("ctrl+s", "save", "Save"),

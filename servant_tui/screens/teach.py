@@ -21,7 +21,6 @@ from textual import events, on, work
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Grid, Horizontal, Vertical
-from textual.screen import Screen
 from textual.widget import Widget
 from textual.widgets import (
     Button,
@@ -116,7 +115,7 @@ def every_press(button: Button) -> Button:
     return button
 
 
-class TeachScreen(ReportsWorkerErrors, Screen[None]):
+class TeachScreen(ReportsWorkerErrors):
     BINDINGS = [
         Binding("escape", "app.pop_screen", "Back"),
         # Priority: the app runs the step change before it forwards the next key of a burst.
@@ -253,7 +252,7 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
 
     def sample_senses(self) -> list[str]:
         """The engine's sample senses (motion, ambient): recorded with the sound."""
-        return list(getattr(self.app.engine, "sample_senses", ()))
+        return list(self.app.engine.sample_senses)
 
     def _with_senses(self) -> str:
         senses = self.sample_senses()
@@ -452,10 +451,7 @@ class TeachScreen(ReportsWorkerErrors, Screen[None]):
     def read_arm_pose(self) -> None:
         """Ask the controller where the arm is (a serial exchange, off the UI thread): armed or
         not, since the wearer guides the arm by hand disarmed."""
-        read = getattr(self.app.engine, "read_arm_pose", None)
-        if read is None:
-            raise ServantError("arm: this engine cannot read the arm's pose; type the angles")
-        self.app.call_from_thread(self._fill_pose, read())
+        self.app.call_from_thread(self._fill_pose, self.app.engine.read_arm_pose())
 
     def _fill_pose(self, pose: dict[str, float]) -> None:
         # whole degrees: the controller's pulse steps read back as 19.98° for 20°

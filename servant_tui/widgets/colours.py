@@ -69,7 +69,9 @@ class ColoursPane(Static):
         table.add_column(justify="right")
         table.add_column()
         table.add_column()
-        matched = palette.matched_colours if palette.matched_colours is not None else []
+        matched: np.ndarray | list[np.ndarray] = (
+            palette.matched_colours if palette.matched_colours is not None else []
+        )
         table.add_row(
             Text("seen", style="bold"), "", "", Text(palette.matched_scene or "no match", "bold")
         )
