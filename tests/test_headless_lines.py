@@ -22,6 +22,7 @@ from servant_core.events import AcousticPrediction, UnknownScene
 from servant_core.servo.emulator import start_emulator
 from servant_core.settings import default_joints
 from servant_core.storage import data_dir
+from tests.conftest import servant
 from tests.test_live_path import expected_pulse
 
 
@@ -113,3 +114,17 @@ def test_an_untaught_place_is_explained_once_then_said_once_per_return(capsys):
     assert "teach mode, key t" in first and f"{library}/<name>/" in first
     assert f"servant train {library} --force" in first
     assert "audio-29: an unknown place again (audio, nearest: street)" in again
+
+
+def test_the_demo_says_why_its_senses_disagree_on_the_street():
+    """Issue 39 item 2: in the demo's street stretch the sound said street and the camera the
+    café for 35 s, then `No scene detected`, and nothing on screen said why. Each stretch of the
+    walk is now said as it begins, the disagreement with its reason, before the decision."""
+    result = servant("demo", "--headless", "--fast")
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    said = [i for i, line in enumerate(lines) if "demo walk: " in line]
+    assert "in the coffee shop" in lines[said[0]]
+    disagree = next(i for i in said if "sound and sight disagree" in lines[i])
+    no_scene = next(i for i, line in enumerate(lines) if "No scene detected" in line)
+    assert disagree < no_scene, lines

@@ -259,6 +259,10 @@ class Engine:
     def _error(self, message: str) -> None:
         self._bus.error(message)
 
+    def tell(self, message: str) -> None:
+        """Say `message` as a `Notice` now, once."""
+        self._emit(Notice(self.clock(), message))
+
     def note(self, message: str) -> None:
         """Say `message` as a `Notice` now and again whenever the senses open: what a front end
         that subscribes later (a first start's "no model yet") must still hear."""

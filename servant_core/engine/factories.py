@@ -18,6 +18,7 @@ from servant_core.engine.arm import Pose, PoseFor
 from servant_core.engine.core import Engine, fusion_config
 from servant_core.engine.loop import DeviceMakers
 from servant_core.errors import ServantError
+from servant_core.events import Notice
 from servant_core.fusion import (
     DEFAULT_POLICY,
     POLICIES,
@@ -28,6 +29,27 @@ from servant_core.fusion import (
 )
 from servant_core.fusion.smoothing import STEADY_FLOOR, STEADY_STAY, SceneSmoother
 from servant_core.senses import SAMPLE_SENSES, SENSES
+
+
+def walk_narrator(engine: Engine) -> Callable[[Any], None]:
+    """A subscriber that says each stretch of the demo's walk as the engine's time enters it:
+    where the wearer is, and why the senses disagree where they do by design (the street heard
+    while the camera still looks into the café), so the screen never leaves that unexplained."""
+    from servant_core.demo.scenes import segment_at
+
+    told: list[Any] = [segment_at(0.0)]
+    engine.note(f"demo walk: {told[0].note}")  # said again when the senses open: at the start
+
+    def narrate(event: Any) -> None:
+        t = getattr(event, "t", None)
+        if not isinstance(t, float | int) or isinstance(event, Notice):
+            return
+        segment = segment_at(float(t))
+        if segment is not told[0]:
+            told[0] = segment
+            engine.tell(f"demo walk: {segment.note}")
+
+    return narrate
 
 
 def build_demo_engine(
@@ -112,6 +134,7 @@ def build_demo_engine(
     )
     if stop_emulator is not None:
         engine.add_cleanup(stop_emulator)
+    engine.subscribe(walk_narrator(engine))
     if fusion is not None and why is not None:
         engine.note(f"learned fusion: {why}; the parallel policy decides")
     if arm:
