@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from servant_core.capture.sample_files import replay_sample_files
-from servant_core.capture.sensor_emulator import SensorEmulator, script_scene
 from servant_core.capture.sensor_sources import sensor_sources
 from servant_core.capture.source import ManualClock
 from servant_core.demo.motion_synth import write_sensor_library
+from servant_core.demo.sensor_emulator import SensorEmulator, script_scene
 from servant_core.engine import Engine
 from servant_core.errors import ServantError
 from servant_core.events import DeviceStatus, SensePrediction, SensorFrame, UnknownScene
@@ -38,6 +38,7 @@ def sensor_model(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return model
 
 
+@pytest.mark.devices
 def test_servant_run_replays_motion_and_ambient_logs_end_to_end(sensor_model, tmp_path):
     """`servant run --headless --imu DIR --ambient DIR`: each 5 s window of the logs is judged,
     in the order the logs play (coffee, gym, street: two files each, 5 s a file)."""
@@ -52,6 +53,7 @@ def test_servant_run_replays_motion_and_ambient_logs_end_to_end(sensor_model, tm
     assert len(ambient) >= 5 and sum(a == e for a, e in zip(ambient, felt, strict=False)) >= 4
 
 
+@pytest.mark.devices
 def test_servant_run_reads_the_sensor_board_through_the_emulators_pty(sensor_model):
     """The real serial path: `servant emulate-sensors` on a pty, `servant run --imu PORT`."""
     link = Path(f"/tmp/servant-test-sensors-{time.monotonic_ns()}")
@@ -81,6 +83,7 @@ def test_servant_run_reads_the_sensor_board_through_the_emulators_pty(sensor_mod
     assert len(felt) >= 2 and set(felt) == {"gym"}, done.stdout
 
 
+@pytest.mark.devices
 def test_a_sensor_board_unplugged_is_reported_and_the_engine_goes_on(sensor_model):
     emulator = SensorEmulator(script_scene([("street", 1000.0)]), seed=2)
     port = emulator.start()
@@ -153,6 +156,7 @@ def test_record_samples_gives_the_next_seconds_of_readings():
     assert 9.0 < float(np.linalg.norm(rows[:, :3], axis=1).mean()) < 10.6
 
 
+@pytest.mark.devices
 def test_the_demo_with_the_learned_fusion_decides_every_place_and_says_what_it_leaned_on():
     """`servant demo --policy learned`: the net is taught on the demo's library at start-up and
     decides from all four senses; every place of the walk is decided, each decision naming the
@@ -165,6 +169,7 @@ def test_the_demo_with_the_learned_fusion_decides_every_place_and_says_what_it_l
     assert senses <= {"audio", "image", "motion", "ambient"} and "motion" in senses
 
 
+@pytest.mark.devices
 def test_the_settings_sensor_board_is_used_by_a_plain_servant_run(sensor_model, tmp_path):
     """A wearer sets the sensor board once in Settings (here a folder of logs, as a port would
     be), and `servant run` uses it with no --imu or --ambient; the settings file is the real one

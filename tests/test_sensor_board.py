@@ -15,7 +15,6 @@ from servant_core.capture.sample_files import (
     replay_sample_files,
     write_sample_csv,
 )
-from servant_core.capture.sensor_emulator import SensorEmulator, parse_script, script_scene
 from servant_core.capture.sensor_sources import sensor_sources
 from servant_core.capture.sensors import (
     IMU_CHANNELS,
@@ -24,6 +23,7 @@ from servant_core.capture.sensors import (
     parse_line,
 )
 from servant_core.capture.source import ManualClock, SampleSource
+from servant_core.demo.sensor_emulator import SensorEmulator, parse_script, script_scene
 from servant_core.errors import ServantError
 from tests.conftest import serve
 
@@ -105,6 +105,7 @@ def test_a_vanished_port_is_one_clear_error_and_the_source_reopens():
     source.close()
 
 
+@pytest.mark.devices
 def test_emulate_sensors_command_serves_until_killed():
     # its own process: killing it unplugs the board for real
     proc, port = serve("emulate-sensors", "--script", "gym:5,coffee:5")

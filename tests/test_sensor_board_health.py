@@ -10,8 +10,8 @@ import time
 
 import pytest
 
-from servant_core.capture.sensor_emulator import SensorEmulator, script_scene
 from servant_core.capture.sensor_sources import sensor_sources
+from servant_core.demo.sensor_emulator import SensorEmulator, script_scene
 from servant_core.engine import Engine
 from servant_core.engine.stream_watch import STALL_SECONDS, StreamWatch
 from servant_core.events import DeviceStatus, SensePrediction

@@ -10,8 +10,8 @@ from textual.widgets import Input
 
 from servant_core.capture.replay import Clip, PacedAudio
 from servant_core.capture.sample_files import read_samples
-from servant_core.capture.sensor_emulator import SensorEmulator, script_scene
 from servant_core.capture.sensor_sources import sensor_sources
+from servant_core.demo.sensor_emulator import SensorEmulator, script_scene
 from servant_core.engine import Engine
 from servant_tui.app import ServantApp
 from servant_tui.screens.teach import TeachScreen

@@ -6,9 +6,9 @@ chunks of `report_every` iterations so the training error can be reported as it 
 paper's Fig. 6), on angles standardised per joint.
 
 Persistence: the trained weights and biases go into an `.npz` with a JSON header, and predictions
-run through `forward`, a plain numpy pass over those arrays, both before and after saving. Loading
-is instant, needs no pickle, and the arm does exactly what was trained and tested: retraining on
-load would make the pose depend on the installed scikit-learn's numerics.
+run through `perceptron.forward`, a plain numpy pass over those arrays, both before and after
+saving. Loading is instant, needs no pickle, and the arm does exactly what was trained and
+tested: retraining on load would make the pose depend on the installed scikit-learn's numerics.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ from threadpoolctl import threadpool_limits
 from servant_core.actions.records import SENSES, TeachRecord, label_scores
 from servant_core.errors import ServantError
 from servant_core.numbers import json_loads
+from servant_core.perceptron import ACTIVATIONS, forward
 from servant_core.recognisers.base import UNKNOWN
 from servant_core.storage import (
     atomic_save_npz,
@@ -41,12 +42,6 @@ from servant_core.storage import (
 
 FORMAT = "servant-action-learner"
 VERSION = 1
-ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
-    "tanh": np.tanh,
-    "relu": lambda a: np.maximum(a, 0.0),
-    "logistic": lambda a: 1.0 / (1.0 + np.exp(-a)),
-    "identity": lambda a: a,
-}
 
 
 def default_learner_path() -> Path:
@@ -64,18 +59,6 @@ class ActionPrediction:
     @property
     def acted(self) -> bool:
         return self.pose is not None
-
-
-def forward(
-    x: np.ndarray, coefs: Sequence[np.ndarray], intercepts: Sequence[np.ndarray], activation: str
-) -> np.ndarray:
-    """The network's output for rows `x`: hidden layers through `activation`, a linear output."""
-    a = x
-    for i, (w, b) in enumerate(zip(coefs, intercepts, strict=True)):
-        a = a @ w + b
-        if i < len(coefs) - 1:
-            a = ACTIVATIONS[activation](a)
-    return a
 
 
 def check_learner_output(path: str | Path) -> Path:

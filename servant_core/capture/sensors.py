@@ -29,7 +29,7 @@ import numpy as np
 
 from servant_core.errors import ServantError
 from servant_core.numbers import MAX_STAMP
-from servant_core.servo.link import PORT_ERRORS, open_serial
+from servant_core.serial_port import PORT_ERRORS, open_serial
 
 IMU_CHANNELS = ("ax", "ay", "az", "gx", "gy", "gz")
 AMBIENT_CHANNELS = ("lux", "celsius", "hpa")

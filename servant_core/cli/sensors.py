@@ -36,9 +36,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_emulate_sensors(args: argparse.Namespace) -> int:
-    from servant_core.capture.sensor_emulator import SensorEmulator, parse_script, script_scene
     from servant_core.demo.motion_synth import SCENE_AMBIENT
     from servant_core.demo.scenes import segment_at
+    from servant_core.demo.sensor_emulator import SensorEmulator, parse_script, script_scene
     from servant_core.errors import ServantError
     from servant_core.pty_port import announce
 

@@ -2,7 +2,7 @@
 walks down the street (`demo.motion_synth`), with each place's light, warmth and pressure.
 
 At real speed they come from the sensor board's emulator on a pty, read through pyserial exactly
-as a real board would be (`capture.sensor_emulator`, `capture.sensors`); as fast as possible
+as a real board would be (`demo.sensor_emulator`, `capture.sensors`); as fast as possible
 (a `ManualClock`), from the same synthesis window by window, following the sound's clock, so a
 fast run is the same on every machine. The motion follows where the wearer *is* — the scene
 heard — even while the camera still shows the café.
@@ -19,11 +19,11 @@ import numpy as np
 from servant_core.audio import DEFAULT_WINDOW_SECONDS
 from servant_core.capture.replay import Clip
 from servant_core.capture.sample_files import PacedSamples
-from servant_core.capture.sensor_emulator import SENSOR_STREAM, SensorEmulator, script_scene
 from servant_core.capture.sensors import CHANNELS, RATES, SensorBoard
 from servant_core.capture.source import ManualClock, SampleSource
 from servant_core.demo.motion_synth import DEMO_SCENES, synth_ambient, synth_motion
 from servant_core.demo.scenes import FAST_BLOCK_SECONDS, WALK, Segment, segment_at
+from servant_core.demo.sensor_emulator import SENSOR_STREAM, SensorEmulator, script_scene
 from servant_core.recognisers import FRESH_METHODS, Recogniser, make_recogniser
 
 TRAIN_STREAM = 7  # the seed word of the sensors' training windows: never the walk's

@@ -36,11 +36,11 @@ from sklearn.exceptions import ConvergenceWarning, NotFittedError
 from sklearn.neural_network import MLPClassifier
 from threadpoolctl import threadpool_limits
 
-from servant_core.actions.learner import ACTIVATIONS, forward
 from servant_core.errors import ServantError
 from servant_core.events import Decision, FusionState
 from servant_core.fusion.parallel import ParallelFusion
 from servant_core.fusion.sequential import AcousticWindow, FusionConfig, scene_line
+from servant_core.perceptron import ACTIVATIONS, forward
 from servant_core.recognisers.base import UNKNOWN, init_params
 
 # Features per sense beside its probabilities: the absent flag, the unknown share and the share

@@ -13,7 +13,6 @@
 
 from __future__ import annotations
 
-import errno
 import math
 import threading
 import time
@@ -25,27 +24,19 @@ import serial
 
 from servant_core.errors import ServantError
 from servant_core.events import ArmState
+from servant_core.serial_port import PORT_ERRORS, open_serial
 from servant_core.servo import ProtocolError, ServoProtocol, protocol_for
 from servant_core.servo.base import Move, pulse_speed
 from servant_core.servo.calibration import angle_to_pulse, clamp_pose, pulse_to_angle, rate_limit
 from servant_core.settings import Joint
 
 MAX_STEP_S = 0.1
-POLL_S = 0.02  # how long one serial read waits before the link looks at its own deadline
 RECONNECT_EVERY_S = 1.0
 MAX_TIMEOUT_S = 60.0  # longer than any controller needs to answer; more looks like a hang
 MAX_RECORD_S = 600.0  # a recording is the user guiding the arm: minutes at most
 MAX_REPLY_BYTES = 4096  # far more than any reply this link asks for: the rest is line noise
 DRY_RUN_PORT = "dry-run"
 T = TypeVar("T")
-
-try:
-    import termios
-
-    # pyserial lets termios.error (not an OSError) out of tcflush on a port whose device is gone.
-    PORT_ERRORS: tuple[type[BaseException], ...] = (serial.SerialException, OSError, termios.error)
-except ImportError:  # no termios on Windows
-    PORT_ERRORS = (serial.SerialException, OSError)
 
 
 def seconds(value: object, what: str, most: float, *, zero: bool = False) -> float:
@@ -65,34 +56,6 @@ def _reason(exc: BaseException) -> str:
     if len(exc.args) == 2 and isinstance(exc.args[1], str):
         return exc.args[1]
     return str(exc)
-
-
-def open_serial(port: str, baudrate: int) -> serial.SerialBase:
-    """Open `port` exclusively, or say in one line why it cannot be opened.
-
-    `port` is a device (/dev/ttyACM0, COM3) or a pyserial URL: `socket://host:port` reaches a
-    controller behind a network bridge, `loop://` and handlers of one's own serve tests.
-    """
-    try:
-        return serial.serial_for_url(
-            port, baudrate, timeout=POLL_S, write_timeout=1.0, exclusive=True
-        )
-    except (serial.SerialException, OSError, ValueError) as exc:
-        code = getattr(exc, "errno", None)
-        text = str(exc)
-        if code == errno.ENOENT or "No such file" in text:
-            reason = "no such serial port; `servant servo list-ports` lists the ports there are"
-        elif (
-            code in (errno.EBUSY, errno.EAGAIN) or "lock" in text.lower() or "busy" in text.lower()
-        ):
-            reason = "the port is busy: another program has it open; close it and try again"
-        elif code == errno.EACCES or "Permission denied" in text:
-            reason = "permission denied; add yourself to the `dialout` group or fix the port's mode"
-        elif code in (errno.ENOTTY, errno.EISDIR) or "Inappropriate ioctl" in text:
-            reason = "not a serial port; `servant servo list-ports` lists the ports there are"
-        else:
-            reason = f"cannot open the port ({text})"
-        raise ServantError(f"{port}: {reason}") from exc
 
 
 class ManualClock:
