@@ -6,7 +6,7 @@ PY := $(VENV)/bin/python
 SHARED ?= ../shared
 VMIC := $(SHARED)/scripts/virtual-mic.sh
 
-.PHONY: setup install demo test bench lint
+.PHONY: setup install demo test test-fast bench lint
 
 setup: $(VENV)/.installed
 
@@ -37,8 +37,14 @@ test: setup
 	@if [ -x $(VMIC) ] && vmic_env=$$(bash $(VMIC) start 2>/dev/null); then eval "$$vmic_env"; fi; \
 	PATH="$(abspath $(VENV))/bin:$$PATH" $(PY) -m pytest -q -p no:cacheprovider --durations=30 -n 2 --dist loadgroup
 
+# The fast lane: the tests without the real data (marked `slow`) and without
+# the devices (marked `devices`: the virtual microphone, tmux, a controller or sensor board
+# emulator in its own process, `servant` in a child process). `make test` runs them all.
+test-fast: setup
+	PATH="$(abspath $(VENV))/bin:$$PATH" $(PY) -m pytest -q -p no:cacheprovider --durations=10 -n 2 --dist loadgroup -m "not slow and not devices"
+
 bench: setup
 	for b in bench/*.py; do $(PY) $$b || exit 1; done
 
 lint: setup
-	$(VENV)/bin/ruff check . && $(VENV)/bin/ruff format --check . && $(VENV)/bin/mypy servant_core
+	$(VENV)/bin/ruff check . && $(VENV)/bin/ruff format --check . && $(VENV)/bin/mypy servant_core servant_tui

@@ -30,10 +30,12 @@ ONE_MICROPHONE = {
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """`make test` runs the suite on two workers (`-n 2 --dist loadgroup`): a file's tests stay
     together on one worker (some share a fixed path, such as the snapshots' library), and the
-    files of `ONE_MICROPHONE` share one worker."""
+    files of `ONE_MICROPHONE` share one worker. Those need the virtual microphone: `devices`."""
     for item in items:
         name = item.path.name
         item.add_marker(pytest.mark.xdist_group("microphone" if name in ONE_MICROPHONE else name))
+        if name in ONE_MICROPHONE:
+            item.add_marker(pytest.mark.devices)
 
 
 def shared_data_dir() -> Path | None:

@@ -101,6 +101,7 @@ def test_train_into_a_folder_or_a_read_only_place_is_one_line(tmp_path):
     assert_refused(run_cli("train", str(lib), "-o", "/proc/servant.npz"), "cannot save")
 
 
+@pytest.mark.devices
 def test_a_file_size_limit_leaves_the_old_model_intact(tmp_path):
     lib = picture_library(tmp_path / "lib")
     model = tmp_path / "m.npz"
@@ -310,6 +311,7 @@ def test_a_mistyped_option_points_to_its_commands_own_help(argv, command):
     assert_refused(outcome, f"servant: error: {command}: ", f"see `servant {command} --help`")
 
 
+@pytest.mark.devices
 def test_servant_run_arm_on_a_missing_port_says_no_such_serial_port():
     outcome = run_cli_subprocess(
         *["run", "--headless", "--no-mic", "--no-camera", "--port", "/dev/ttyNOPE", "--arm"],

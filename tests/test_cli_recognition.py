@@ -164,6 +164,7 @@ def test_predict_with_a_foreign_model_and_a_non_picture(tmp_path, capsys):
     assert "not a Servant model file" in capsys.readouterr().err
 
 
+@pytest.mark.devices
 def test_console_script_lists_subcommands():
     out = subprocess.run(
         [sys.executable, "-m", "servant_tui", "--help"],
@@ -182,6 +183,7 @@ TWO_PLACES = {
 }
 
 
+@pytest.mark.devices
 def test_predict_says_an_unknown_place_at_a_building_site(shared_data, tmp_path):
     """Two places taught (the default methods, as `servant train` fits them); a real recording
     of a place never taught, from another source, is said to be an unknown place, window after

@@ -49,6 +49,7 @@ def interrupted(script: str, tmp_path, after: float = 0.0) -> tuple[bytes, int]:
     return err, child.returncode
 
 
+@pytest.mark.devices
 @pytest.mark.parametrize("after", [0.05, 0.2, 0.4, 0.8, 1.5])
 def test_ctrl_c_early_prints_no_traceback(after: float, tmp_path) -> None:
     err, code = interrupted(CONSOLE_SCRIPT, tmp_path, after)
@@ -73,6 +74,7 @@ SLOW_FIRST_IMPORT = (
 )
 
 
+@pytest.mark.devices
 def test_ctrl_c_in_the_first_import_of_main_is_quiet(tmp_path) -> None:
     """A fresh clone's CI run: Ctrl-C 0.05 s after start landed in `main`'s first import (on a
     busy machine), before its guard, and printed a traceback."""
@@ -103,6 +105,7 @@ SWALLOWED_IN_C = (
 )
 
 
+@pytest.mark.devices
 def test_ctrl_c_that_an_extension_turned_into_an_import_error_is_quiet(tmp_path) -> None:
     err, code = interrupted(SWALLOWED_IN_C, tmp_path)
     assert err == b"", err.decode()
@@ -117,6 +120,7 @@ def test_ctrl_c_that_an_extension_turned_into_an_import_error_is_quiet(tmp_path)
         ["servo", "move", "--dry-run", "shoulder=80"],
     ],
 )
+@pytest.mark.devices
 def test_a_reader_that_goes_away_ends_the_command_quietly(argv: list[str], tmp_path) -> None:
     """`servant demo --headless | head -n 1`: once head had its line, every event after printed
     a BrokenPipeError traceback (the demo went on for its whole duration), and a one-shot
@@ -147,6 +151,7 @@ def test_a_reader_that_goes_away_ends_the_command_quietly(argv: list[str], tmp_p
         ["servo", "move", "--dry-run", "shoulder=80"],
     ],
 )
+@pytest.mark.devices
 def test_output_to_a_full_disk_is_one_line(argv: list[str], tmp_path) -> None:
     """`servant ... > /dev/full` (a full disk behind a redirection) ended in an OSError
     traceback, in the demo one for every event."""
@@ -171,6 +176,7 @@ def test_output_to_a_full_disk_is_one_line(argv: list[str], tmp_path) -> None:
     ]
 
 
+@pytest.mark.devices
 def test_teach_with_stdin_closed_is_one_line(tmp_path) -> None:
     """`servant teach <&-`: sys.stdin is None, and reading it was an AttributeError traceback."""
     done = subprocess.run(

@@ -152,6 +152,7 @@ def demo_lines(*options: str) -> list[str]:
     return result.stdout.splitlines()
 
 
+@pytest.mark.devices
 def test_servant_demo_paper_prints_the_papers_lines():
     lines = demo_lines("--paper", "--duration", "30")
     assert any(line.endswith("microphone ok: demo sound: listening at 16000 Hz") for line in lines)
@@ -161,6 +162,7 @@ def test_servant_demo_paper_prints_the_papers_lines():
     assert any("heard gym" in line for line in lines)
 
 
+@pytest.mark.devices
 def test_servant_demo_shows_percentages_and_every_scene_in_every_loop():
     """By default the demo shows the methods beyond the paper: percentages a newcomer can read,
     and each of its places detected again on every pass of the walk (95 s)."""
@@ -178,6 +180,7 @@ def test_servant_demo_shows_percentages_and_every_scene_in_every_loop():
         assert found == set(SCENES), (loop, found)
 
 
+@pytest.mark.devices
 def test_servant_run_headless_on_a_video_camera_without_microphone(tmp_path):
     import cv2
 

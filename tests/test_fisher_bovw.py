@@ -262,6 +262,7 @@ def test_a_picture_of_a_taught_place_reads_clearly_above_average(shared_data) ->
     assert np.median(own) >= 1.3 and np.median(street) <= 0.77, (np.median(own), np.median(street))
 
 
+@pytest.mark.devices
 @pytest.mark.slow
 def test_servant_predict_shows_a_taught_picture_clearly_above_average(shared_data, tmp_path):
     """What the user reads: a model trained as `servant train` trains it, on a library of two

@@ -436,6 +436,7 @@ def test_fuzz_train_keeps_the_old_model(ws: Workspace, kind, changes, length, sk
 # A sample in a child process: the real console script, its peak memory measured.
 
 
+@pytest.mark.devices
 def test_worst_cases_in_a_child_process_stay_under_a_gigabyte(ws: Workspace) -> None:
     wav_1hz = bytearray(ws.audio[".wav"])
     wav_1hz[24:28] = (1).to_bytes(4, "little")

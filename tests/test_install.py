@@ -16,6 +16,7 @@ from tests.conftest import REPO
 pytestmark = pytest.mark.skipif(shutil.which("make") is None, reason="make is not installed")
 
 
+@pytest.mark.devices
 def test_make_install_puts_servant_on_the_path(tmp_path):
     venv = Path(sys.prefix)  # the env these tests run in: `make setup` is not run again
     bindir = tmp_path / "bin"
@@ -46,6 +47,7 @@ def test_the_readme_says_how_to_get_servant_on_the_path_before_using_it():
     assert -1 < readme.find("source .venv/bin/activate") < first_use
 
 
+@pytest.mark.devices
 def test_make_setup_says_what_it_installs_and_keeps_pips_chatter_in_a_log(tmp_path):
     """Issue 39 item 14: `make demo` was a minute of silent `pip -q`, then setuptools'
     'BuildBackendWarning: Editable installation … be careful with folders'. Read from make's own

@@ -139,6 +139,7 @@ def test_teach_records_are_bounded_in_scenes_and_records(tmp_path: Path) -> None
     assert full.read_bytes() == before
 
 
+@pytest.mark.devices
 @pytest.mark.parametrize("speed", ["4.9e-324", "1e-300", "0.001"])
 def test_a_joint_speed_too_small_to_finish_a_move_is_refused(tmp_path: Path, speed: str) -> None:
     """A speed above 0 but tiny made `servo move` wait for ever (the move needs 5/5e-324 s,

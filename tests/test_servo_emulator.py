@@ -134,6 +134,7 @@ def test_link_moves_the_emulated_arm_and_reads_it_back(protocol, resolution, clo
         emulator.stop()
 
 
+@pytest.mark.devices
 @pytest.mark.parametrize("command", ["emulate-servo", "emulate-sensors"])
 def test_list_ports_names_a_running_emulators_port_and_forgets_it_once_stopped(command):
     """Issue 39 item 13: `servant servo list-ports` listed /dev/ttyS0 but not the emulator's

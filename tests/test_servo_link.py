@@ -198,6 +198,7 @@ def _emulator_process(protocol: str) -> tuple[subprocess.Popen, str]:
     return proc, port.group(1)
 
 
+@pytest.mark.devices
 @pytest.mark.parametrize("protocol", ["maestro", "ssc32", "firmata"])
 def test_an_idle_controller_killed_disarms_the_link_with_one_clear_error(protocol):
     # Issue 13, 1: pyserial's reset_input_buffer raises termios.error (not an OSError) on a

@@ -12,9 +12,9 @@ from hypothesis import strategies as st
 
 from servant_core.errors import ServantError
 from servant_core.servo.base import pulse_speed
+from servant_core.servo.calibration import pulse_to_angle
 from servant_core.servo.emulator import ServoEmulator
 from servant_core.servo.link import MAX_STEP_S, ManualClock, ServoLink
-from servant_core.servo.calibration import pulse_to_angle
 from servant_core.settings import Joint, default_joints
 
 JOINTS = default_joints()

@@ -30,6 +30,7 @@ def special(path: Path, kind: str) -> Path:
     return path
 
 
+@pytest.mark.devices
 @pytest.mark.parametrize("kind", SPECIAL)
 def test_settings_as_a_special_file_are_one_line(tmp_path: Path, kind: str) -> None:
     settings = special(tmp_path / "settings.json", kind)
@@ -41,6 +42,7 @@ def test_settings_as_a_special_file_are_one_line(tmp_path: Path, kind: str) -> N
     assert outcome.peak_mb < 500
 
 
+@pytest.mark.devices
 @pytest.mark.parametrize("kind", SPECIAL)
 def test_teach_records_as_a_special_file_are_one_line(tmp_path: Path, kind: str) -> None:
     records = special(tmp_path / "records.json", kind)
@@ -53,6 +55,7 @@ def test_teach_records_as_a_special_file_are_one_line(tmp_path: Path, kind: str)
     assert ("not a regular file" if kind == "fifo" else "symbolic link") in outcome.err
 
 
+@pytest.mark.devices
 @pytest.mark.parametrize("kind", SPECIAL)
 def test_a_groups_file_as_a_special_file_is_one_line(tmp_path: Path, kind: str) -> None:
     """`eval audio --protocol source --groups FIFO` waited for a writer for ever (and a link to
@@ -66,6 +69,7 @@ def test_a_groups_file_as_a_special_file_is_one_line(tmp_path: Path, kind: str) 
     assert outcome.code == 2 and "not a regular file" in outcome.err
 
 
+@pytest.mark.devices
 @pytest.mark.parametrize("kind", SPECIAL)
 def test_a_model_as_a_special_file_is_one_line(tmp_path: Path, kind: str) -> None:
     model = special(tmp_path / "model.npz", kind)
@@ -74,6 +78,7 @@ def test_a_model_as_a_special_file_is_one_line(tmp_path: Path, kind: str) -> Non
     assert outcome.code == 2 and "not a regular file" in outcome.err
 
 
+@pytest.mark.devices
 def test_a_camera_path_that_is_a_fifo_is_refused_without_blocking(tmp_path: Path) -> None:
     fifo = special(tmp_path / "camera.mp4", "fifo")
     with pytest.raises(ServantError, match="not a video file"):
@@ -133,6 +138,7 @@ def test_a_recording_whose_disk_fails_is_one_line_and_quiet(
     assert "Exception ignored" not in err and "Traceback" not in err
 
 
+@pytest.mark.devices
 @pytest.mark.parametrize("kind", ["loop", "dangling"])
 def test_settings_or_records_behind_a_link_to_no_file_are_one_line(tmp_path: Path, kind: str):
     """A settings file that was a loop of links (or a link whose target is gone) was taken for

@@ -136,6 +136,7 @@ def test_servo_query_and_errors(monkeypatch, capsys):
     assert status == 2 and "'elbow=abc' is not an angle" in err
 
 
+@pytest.mark.devices
 def test_emulate_servo_prints_the_port_to_connect_to():
     proc = subprocess.run(
         [
@@ -156,6 +157,7 @@ def test_emulate_servo_prints_the_port_to_connect_to():
     assert re.match(r"Emulating a Lynxmotion SSC-32 on /dev/pts/\d+; connect with", proc.stdout)
 
 
+@pytest.mark.devices
 def test_teach_survives_the_controller_killed_while_idle(tmp_path):
     # Issue 13, 1: the emulator killed between two answers; `record` then read the lost port.
     emulator = subprocess.Popen(
@@ -241,6 +243,7 @@ def test_servo_query_refuses_a_timeout_that_would_hang(timeout, capsys):
     assert "argument --timeout" in capsys.readouterr().err
 
 
+@pytest.mark.devices
 def test_teach_dry_run_refuses_recordings_that_never_end(tmp_path):
     # Issue 13, 7: `record nan` looped for ever, growing memory; `record 1e9` died in
     # MemoryError. Run in a child process with bounded memory and time, so a regression fails
@@ -275,6 +278,7 @@ def test_teach_files_that_cannot_be_saved_are_one_line(option, what, monkeypatch
     assert f"cannot save the {what} (No such file or directory)" in err
 
 
+@pytest.mark.devices
 def test_emulate_servo_prints_a_line_per_move_it_receives(tmp_path, monkeypatch, capsys):
     """Issue 22 item 9: the emulator's terminal says what it was sent, once per move (the link
     sends a rate-limited move as many small targets)."""
@@ -300,6 +304,7 @@ def test_emulate_servo_prints_a_line_per_move_it_receives(tmp_path, monkeypatch,
     )
 
 
+@pytest.mark.devices
 @pytest.mark.parametrize("stdin", ["/dev/zero", "long"])
 def test_an_endless_or_overlong_answer_is_one_line(stdin, tmp_path):
     """`servant teach < /dev/zero` read one endless line until memory ran out (4.5 GB in 10 s),

@@ -39,6 +39,7 @@ def test_one_thread_pools_sets_what_the_environment_leaves_unset(monkeypatch):
     assert os.environ["OPENBLAS_NUM_THREADS"] == "4"
 
 
+@pytest.mark.devices
 def test_the_servant_command_starts_numpy_with_one_thread_pools():
     env = {k: v for k, v in os.environ.items() if k not in POOLS}
     done = subprocess.run(
