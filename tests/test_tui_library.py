@@ -104,3 +104,29 @@ async def test_evaluate_says_what_to_record_when_one_sample_a_place_is_too_few(t
         status = app.screen.query_one("#library-status")
         await settle(pilot, lambda: "failed" in str(status.render()), tries=3000)
         assert "record another sample of cafe, street in teach mode" in str(status.render())
+
+
+async def test_d_on_a_scene_says_what_it_deletes_and_end_selects_the_last_sample(tmp_path):
+    """Issue 39 item 11: with a scene row selected `d` did nothing and said nothing; on the
+    Samples table `End` did not move the selection, so `d` then offered the first file."""
+    root = write_library(tmp_path / "library")
+    app = ServantApp(ReplayEngine(), library_root=root)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await pilot.press("l")
+        await settle(pilot, lambda: isinstance(app.screen, LibraryScreen))
+        screen = app.screen
+        screen.query_one("#scenes", DataTable).focus()
+        await pilot.press("d")
+        await pilot.pause()
+        assert not isinstance(app.screen, Confirm)
+        said = [n.message for n in app._notifications]
+        assert any("selected in Samples" in m and "cafe" in m for m in said), said
+        samples = screen.query_one("#samples", DataTable)
+        samples.focus()
+        await pilot.press("end")
+        await pilot.pause()
+        assert samples.cursor_row == samples.row_count - 1
+        last = screen.selected_sample()
+        await pilot.press("d")
+        await settle(pilot, lambda: isinstance(app.screen, Confirm))
+        assert last is not None and last.name in str(app.screen.query_one(Static).render())

@@ -62,6 +62,9 @@ class LibraryScreen(ReportsWorkerErrors):
         Binding("r", "relabel", "Relabel"),
         Binding("R", "retrain", "Retrain"),
         Binding("e", "evaluate", "Evaluate"),
+        # the tables' own home/end scroll without moving the selection that `d` and `r` act on
+        Binding("home", "edge_row(0)", show=False, priority=True),
+        Binding("end", "edge_row(-1)", show=False, priority=True),
         *HELP_AND_QUIT,
     ]
 
@@ -146,9 +149,24 @@ class LibraryScreen(ReportsWorkerErrors):
         key = samples.coordinate_to_cell_key(samples.cursor_coordinate).row_key.value
         return None if key is None else Path(key)  # each row is keyed by its file's path
 
+    def action_edge_row(self, which: int) -> None:
+        """Home / End: the first or last row of the focused table, selected."""
+        table = self.focused
+        if isinstance(table, DataTable) and table.row_count:
+            table.move_cursor(row=which % table.row_count)
+
     def action_delete(self) -> None:
+        if self.focused is self.query_one("#scenes", DataTable):
+            self.notify(
+                "d deletes the recording or picture selected in Samples (Tab goes there). A "
+                f"whole place is removed by deleting its folder, {self.root}/"
+                f"{self.scene or '<scene>'}/, outside Servant",
+                title="Library",
+            )
+            return
         path = self.selected_sample()
         if path is None:
+            self.notify("This place has no recordings or pictures to delete.", title="Library")
             return
 
         def confirmed(yes: bool | None) -> None:
