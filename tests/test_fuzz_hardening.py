@@ -18,6 +18,7 @@ import errno
 import json
 import math
 import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -377,3 +378,36 @@ def test_fuzz_a_label_whose_write_fails_can_be_given_again(
     path = engine.label_unknown(window, place)
     assert path.parent == root / place and path.is_file()
     assert len(tree(root)) == len(before) + 1 + (place not in before)
+
+
+@fuzz(30)
+@given(
+    writers=st.lists(st.sampled_from(["paper", "fresh"]), min_size=2, max_size=4),
+    order=st.randoms(use_true_random=False),
+    existing=st.booleans(),
+)
+def test_fuzz_concurrent_trainings_of_one_model_file(ws: Workspace, writers, order, existing):
+    """Issue 41 item 4: of trainings that all began before any of them saved, whatever order
+    they finish in, the first to save wins, every later one is refused in one line, nothing it
+    wrote is left, and the file always loads as the winner's model."""
+    from servant_core.modelfile import load_model, replace_model
+    from servant_core.storage import file_stamp
+
+    folder = Path(tempfile.mkdtemp(prefix="concurrent-", dir=ws.root))
+    target = folder / "model.npz"
+    if existing:
+        target.write_bytes(ws.good_model)
+    models = {"paper": load_model(ws.model), "fresh": load_model(ws.fresh_model)}
+    stamps = [file_stamp(target) for _ in writers]  # every run began before any saved
+    finishing = list(range(len(writers)))
+    order.shuffle(finishing)
+    first = finishing[0]
+    replace_model(target, models[writers[first]], None, stamps[first], backup=False)
+    won = target.read_bytes()
+    for later in finishing[1:]:
+        with pytest.raises(ServantError) as refused:
+            replace_model(target, models[writers[later]], None, stamps[later], backup=False)
+        assert "\n" not in str(refused.value) and "someone else" in str(refused.value)
+        assert target.read_bytes() == won
+    assert set(load_model(target)) == set(models[writers[first]])
+    assert sorted(p.name for p in folder.iterdir()) == ["model.npz"]
