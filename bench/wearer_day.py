@@ -278,14 +278,18 @@ def walk(
     threshold: float | None = None,
     audio_method: str = FRESH_METHODS["audio"],
     accept_cosine: float | None = None,
+    calibrated: bool = False,
 ) -> dict[str, Any]:
     """Teach, then walk through the engine; what happened in each stay. `answering`: the wearer
     answers "What is this place?" (`--answers`); `threshold`: the arm's confidence threshold in
     percent (None: the user's default); `audio_method`: the sound's recogniser;
-    `accept_cosine`: a fixed nearest-taught-window cosine (None: the method's own)."""
+    `accept_cosine`: a fixed nearest-taught-window cosine (None: the method's own);
+    `calibrated`: each place's acceptance calibrated by the background instead."""
     audio = make_recogniser("audio", audio_method)
-    if accept_cosine is not None:  # a fixed acceptance instead of the calibrated one
-        audio.accept_cosine, audio.calibrated_accept = accept_cosine, False
+    if accept_cosine is not None:  # another fixed acceptance than the method's
+        audio.accept_cosine = accept_cosine
+    if calibrated:  # each place's acceptance from the background (issue 37)
+        audio.calibrated_accept = True
     audio.featurize = remembered(audio.featurize)  # type: ignore[method-assign]
     X, y = plan["audio"]
     audio.fit(audio.featurize(X), y)
@@ -490,8 +494,12 @@ def main() -> int:
     parser.add_argument(
         "--accept-cosine",
         type=float,
-        help="birdnet: a fixed nearest-taught-window cosine (0.5 before it was calibrated) "
-        "instead of each place's own from the background",
+        help="birdnet: another fixed nearest-taught-window cosine than its own (0.5)",
+    )
+    parser.add_argument(
+        "--calibrated-accept",
+        action="store_true",
+        help="birdnet: each place's acceptance from the background instead of the fixed cosine",
     )
     parser.add_argument(
         "--answers",
@@ -530,6 +538,7 @@ def main() -> int:
                         args.threshold,
                         args.audio_method,
                         args.accept_cosine,
+                        args.calibrated_accept,
                     )
                 )
             print(f"  {size} places, draw {draw}: {', '.join(plan['taught'])}", flush=True)

@@ -191,6 +191,7 @@ def three_places(shared_data):
     street's later windows, and every window of a crowd and a beach never taught."""
     dev = shared_data / "audio" / "dev"
     model = make_recogniser("audio", "birdnet")
+    model.calibrated_accept = True  # off by default (docs/research.md, issue 37)
     taught = {
         "library": "library/focusflow-library.mp3",
         "street": "street/audio-ambient-city.mp3",
@@ -214,7 +215,7 @@ def test_each_place_accepts_what_is_nearer_its_teaching_than_anything_elsewhere(
     minutes (0.40 named); each place's own acceptance is the nearest the background comes to
     what was taught there."""
     model, later_street, elsewhere = three_places
-    assert model.calibrated_accept
+    assert not make_recogniser("audio", "birdnet").calibrated_accept  # the default: fixed
     background = model.background_descriptors_
     background = background / np.linalg.norm(background, axis=1, keepdims=True)
     for place in model.scenes_:

