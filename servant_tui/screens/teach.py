@@ -89,6 +89,10 @@ STATUS_OF_WORK = {
 }
 
 
+# "shoulder 40°, elbow 100°, gripper 60°" and room for a fourth joint
+POSE_COLUMN_WIDTH = 48
+
+
 class KnownScenes(Select[str]):
     """The known scenes' list, where teach mode opens once a scene is known. A name typed at it
     goes into the new name's field, and the Enter after it names the scene: a returning wearer
@@ -234,7 +238,12 @@ class TeachScreen(ReportsWorkerErrors):
 
     def on_mount(self) -> None:
         self.query_one("#error-curve").border_title = "training error (degrees)"
-        self.query_one("#samples", DataTable).add_columns("scene", "pose", "source")
+        samples = self.query_one("#samples", DataTable)
+        samples.add_column("scene")
+        # a width of its own: left to fit its content, the pose of the first sample added (from
+        # a worker) sometimes kept the header's four cells ("shou"; issue 39 item 15)
+        samples.add_column("pose", width=POSE_COLUMN_WIDTH)
+        samples.add_column("source")
         self._list_samples()
         self.query_one("#predictions", DataTable).add_columns("scene", *self.joints())
         self.query_one("#steps", OptionList).highlighted = 0
