@@ -153,6 +153,8 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
     background_keys: ClassVar[tuple[str, ...]] = FRAME_KEYS
     # the nearest-taught-window check of `_unlike_taught` (None: none; `birdnet` has one)
     accept_cosine: float | None = None
+    # each place's acceptance from the background instead (`_acceptance`; `birdnet` offers it)
+    calibrated_accept: bool = False
 
     def __init__(
         self,
@@ -310,7 +312,6 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
     def _fit_heads(self) -> None:
         """The logistic head over every stored descriptor; the open set's centroids (one a
         scene, equal spreads) over the windows as heard, not their equalised copies."""
-        self.__dict__.pop("_acceptance_cache", None)  # the taught windows changed
         self._fit_head()
         heard = ~self.train_derived_
         self.novelty_head_ = SceneCentroids.fit(
@@ -451,14 +452,10 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         `accept_cosine`, or, calibrated (`calibrated_accept`), the nearest any window of the
         background (somewhere else, by definition) comes to them: a window is this place's only
         if it is more like what the wearer taught here than anything elsewhere is."""
-        calibrated = getattr(self, "calibrated_accept", False)
-        if not calibrated or not len(self.background_descriptors_):
+        if not self.calibrated_accept or not len(self.background_descriptors_):
             return float(self.accept_cosine or 0.0)
-        cache: dict[str, float] = self.__dict__.setdefault("_acceptance_cache", {})
-        if place not in cache:
-            near = unit_rows(self.background_descriptors_) @ self._taught_rows(place).T
-            cache[place] = float(np.max(near)) if near.size else float(self.accept_cosine or 0.0)
-        return cache[place]
+        near = unit_rows(self.background_descriptors_) @ self._taught_rows(place).T
+        return float(np.max(near)) if near.size else float(self.accept_cosine or 0.0)
 
     def _open_proba(self, D: np.ndarray) -> np.ndarray:
         """(n, scenes): the probability of each taught place and not somewhere else; the rest
