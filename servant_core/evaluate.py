@@ -280,11 +280,7 @@ def audio_plans(
     of shots (each tested on the temporal test part)."""
     temporal = temporal_split(wf.recording, wf.position)
     if protocol == TAUGHT:
-        if (~temporal).any():
-            protocol = "temporal"
-        else:
-            _check_samples_to_leave_out(wf)
-            protocol = "recording"
+        protocol = _taught_protocol(wf, temporal)
     if protocol == "temporal":
         return [AudioPlan(protocol, [temporal], [~temporal])]
     if protocol == "fewshot":
@@ -305,22 +301,39 @@ def audio_plans(
     return [AudioPlan(protocol, rows, [~row for row in rows])]
 
 
-def _check_samples_to_leave_out(wf: WindowFeatures) -> None:
-    """Leaving one sample out needs two places, each with two samples or more (a place whose
-    only sample is left out cannot be recognised); if not, what to record (teach mode's words)."""
+def _taught_protocol(wf: WindowFeatures, temporal: np.ndarray) -> str:
+    """What `taught` means for a library: leave one recording out once teach mode's 5 s samples
+    (one window each) are in it, so that every sample is tested, not the later part of a longer
+    recording alone; `temporal` for a library of longer recordings only."""
+    samples = np.bincount(wf.recording, minlength=len(wf.recordings)) == 1
+    why_not = _samples_to_leave_out(wf)
+    if why_not is None and samples.any():
+        return "recording"
+    if (~temporal).any():
+        return "temporal"
+    if why_not is not None:
+        raise ServantError(why_not)
+    return "recording"
+
+
+def _samples_to_leave_out(wf: WindowFeatures) -> str | None:
+    """Why one sample cannot be left out at a time (teach mode's words), or None: it needs two
+    places, each with two samples or more (a place whose only sample is left out cannot be
+    recognised)."""
     per_scene = Counter(str(wf.scenes[wf.recording == r][0]) for r in np.unique(wf.recording))
     if len(per_scene) < 2:
-        raise ServantError(
+        return (
             "nothing to evaluate yet: teach a second place in teach mode (key t), with two "
             "recordings or more"
         )
     single = sorted(scene for scene, n in per_scene.items() if n < 2)
     if single:
-        raise ServantError(
+        return (
             f"nothing to evaluate yet: record another sample of {', '.join(single)} in teach "
             "mode (key t); each recording here is one window, and one is left out at a time to "
             "test"
         )
+    return None
 
 
 def seeded_params(

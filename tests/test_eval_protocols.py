@@ -2,6 +2,7 @@
 scene libraries synthesised by the demo's own code (no real data needed)."""
 
 import json
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -11,7 +12,14 @@ import soundfile as sf
 from servant_core.cli import main
 from servant_core.demo.audio_synth import DEMO_RATE
 from servant_core.demo.scenes import synth_picture, synth_window
-from servant_core.evaluate import fewshot_split, seeded_params, temporal_split
+from servant_core.evaluate import (
+    TAUGHT,
+    audio_plans,
+    fewshot_split,
+    seeded_params,
+    temporal_split,
+)
+from servant_core.library import Recording, WindowFeatures
 
 SCENES = ("coffee", "gym", "street")
 
@@ -158,3 +166,34 @@ def test_eval_audio_follows_every_fold_after_the_listening(libraries):
     folds = 2 * len(SCENES)  # a model for each recording left out, for each seed
     assert seen == [(k, folds * 2) for k in range(1, folds * 2 + 1)]
     assert result["seeds"] == 2
+
+
+def windows_of(lengths):
+    """WindowFeatures of recordings of {scene: [windows of each recording]} (features unused)."""
+    recordings, scenes, recording, position = [], [], [], []
+    for scene, sizes in lengths.items():
+        for n in sizes:
+            scenes += [scene] * n
+            recording += [len(recordings)] * n
+            position += list(range(n))
+            recordings.append(Recording(scene, Path(f"{scene}/r{len(recordings)}.wav")))
+    features = np.zeros((len(scenes), 2))
+    return WindowFeatures(
+        features, np.array(scenes), np.array(recording), np.array(position), recordings
+    )
+
+
+def test_taught_tests_every_teach_sample_beside_a_longer_recording():
+    """Issue 39 item 5: a library of teach mode's 5 s samples with one longer recording was
+    evaluated on the longer recording's later windows alone (3 test windows, one place): every
+    recording is left out and tested in turn."""
+    wf = windows_of({"cafe": [1, 1, 1, 4], "street": [1, 1, 1]})
+    (plan,) = audio_plans(wf, TAUGHT)
+    assert plan.protocol == "recording" and len(plan.tests) == len(wf.recordings)
+    assert np.logical_or.reduce(plan.tests).all()
+    # longer recordings only: their later part is the test, as before
+    (plan,) = audio_plans(windows_of({"cafe": [4, 4], "street": [4]}), TAUGHT)
+    assert plan.protocol == "temporal"
+    # a place with a single sample cannot be left out: the later part of the longer one
+    (plan,) = audio_plans(windows_of({"cafe": [1, 4], "street": [1]}), TAUGHT)
+    assert plan.protocol == "temporal"
