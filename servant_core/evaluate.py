@@ -17,7 +17,7 @@ from __future__ import annotations
 import inspect
 import math
 from collections import Counter
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,7 +33,6 @@ from servant_core.fusion import (
     FusionConfig,
     FusionNet,
     LearnedFusion,
-    ParallelFusion,
     scene_line,
 )
 from servant_core.fusion.learned import SenseOpinions
@@ -43,6 +42,7 @@ from servant_core.fusion.learning import (
     train_fusion_net,
     window_opinions,
 )
+from servant_core.fusion.pipeline import DecisionPipeline, Said
 from servant_core.library import (
     Picture,
     SceneLibrary,
@@ -61,7 +61,12 @@ from servant_core.recognisers import (
     methods_for,
 )
 from servant_core.recognisers.background import kept_out
-from servant_core.recognisers.base import fit_visits, open_predict, open_probabilities
+from servant_core.recognisers.base import (
+    fit_visits,
+    knows_elsewhere,
+    open_predict,
+    open_probabilities,
+)
 from servant_core.storage import read_bounded_bytes
 
 PROTOCOLS = EVAL_PROTOCOLS
@@ -666,50 +671,19 @@ def fit_paired(
     return PairedFit(audio, wf, train, visual, X, kept, p_train)
 
 
-Said = tuple[str, float, dict[str, float] | None]
-"""One sense's opinion in an encounter: its scene, its confidence, its scores (None: not given)."""
 SENSES = ("audio", "image")
 
 
-def _tell(policy: Any, sense: str, said: Said, t: float) -> list[Any]:
-    """Give a policy one opinion: with its scores to a policy that takes any sense (`on_sense`)
-    and to the parallel policy where the sound knows somewhere else (opinions with scores, as
-    `servant predict` gives them then), as the scene and confidence to a rule policy."""
-    scene, confidence, scores = said
-    if hasattr(policy, "on_sense"):
-        return list(policy.on_sense(sense, scene, confidence, t, scores))
-    if isinstance(policy, ParallelFusion) and scores is not None:
-        # a sound that knows somewhere else, with its probabilities: the pictures are evidence,
-        # not votes, as in the live engine (`Engine._judged`)
-        tell_open = policy.on_acoustic if sense == "audio" else policy.on_visual
-        return list(tell_open(scene, confidence, t, scores=scores))
-    tell = policy.on_acoustic if sense == "audio" else policy.on_visual
-    return list(tell(scene, confidence, t))
-
-
 def run_encounter(
-    policy: Any, config: FusionConfig, acoustic: Said | None, visual: Sequence[Said]
+    policy: Any,
+    config: FusionConfig,
+    acoustic: Said | None,
+    visual: Sequence[Said],
+    open_roles: Collection[str] = (),
 ) -> Decision:
-    """One scene encounter in simulated time: the acoustic opinion at t=0 (None: no sound),
-    then pictures as the policy asks for them (cycling through `visual`; none if empty), until
-    a decision. A policy that never opened a window decides nothing."""
-    t = 0.0
-    step = config.picture_interval_s / 4
-    events = _tell(policy, "audio", acoustic, t) if acoustic is not None else []
-    shown = 0
-    horizon = config.acoustic_window_s + config.picture_interval_s + 5 * step
-    while t <= horizon:
-        for event in events:
-            if isinstance(event, Decision):
-                return event
-        t = round(t + step, 9)
-        events = policy.tick(t)
-        if not events and visual and policy.wants_picture(t):
-            events = _tell(policy, "image", visual[shown % len(visual)], t)
-            shown += 1
-    if policy.state(t).phase == "listening":
-        return Decision(t, None, 0.0, scene_line(None))
-    raise RuntimeError(f"fusion policy {type(policy).__name__} made no decision within its window")
+    """One scene encounter through a fresh decision pipeline around `policy`
+    (`DecisionPipeline.encounter`): what the live engine would decide of these opinions."""
+    return DecisionPipeline(policy).encounter(config, acoustic, visual, open_roles)
 
 
 def run_fusion(
@@ -778,6 +752,7 @@ class FusionSetup:
     acoustic: list[Said]
     pictures: dict[str, list[Said]]
     opinions: dict[str, SenseOpinions] | None = None
+    open_roles: frozenset[str] = frozenset()  # the roles whose recogniser knows elsewhere
 
 
 def fusion_setup(
@@ -803,6 +778,11 @@ def fusion_setup(
         said_of(fitted.audio, wf.features[~train]),
         pictures,
         fusion_opinions(fitted, folds) if folds else None,
+        frozenset(
+            role
+            for role, recogniser in (("acoustic", fitted.audio), ("visual", fitted.visual))
+            if knows_elsewhere(recogniser)
+        ),
     )
 
 
@@ -827,7 +807,7 @@ def score_fusion(
             cursor[scene] = (start + config.pictures_needed) % len(pics)
         heard = None if drop_sense == "audio" else setup.acoustic[i]
         decision = run_encounter(
-            make_policy(), config, heard, [] if drop_sense == "image" else shown
+            make_policy(), config, heard, [] if drop_sense == "image" else shown, setup.open_roles
         )
         if decision.scene is not None:
             decided += 1

@@ -29,13 +29,12 @@ from servant_core.evaluate import (
     read_groups,
     recording_groups,
     run_encounter,
-    run_fusion,
     said_of,
 )
 from servant_core.event_text import confidence_text, place
 from servant_core.features.rows import checked_rows, usable_rows
-from servant_core.fusion import FusionConfig, LearnedFusion, ParallelFusion
-from servant_core.fusion.elsewhere import beside_open_sound, open_decision, shown
+from servant_core.fusion import POLICIES, FusionConfig, LearnedFusion
+from servant_core.fusion.elsewhere import beside_open_sound, shown
 from servant_core.library import (
     SceneLibrary,
     featurize_recordings,
@@ -298,31 +297,16 @@ def cmd_predict(args: argparse.Namespace) -> int:
         ]
     if first_acoustic is not None and visual_predictions:
         config = _fusion_config(args)
-        if args.policy == "learned":
-            # the net saved with the model by `train --learned-fusion`; without one, the fallback
-            policy = LearnedFusion(config, fusion)
-            decision = run_encounter(policy, config, first_acoustic, visual_predictions)
-        elif args.policy == "parallel" and knows_elsewhere(model.get("acoustic")):
-            # as the live engine decides: on the probability of the sound's place and not
-            # elsewhere, the pictures as evidence (a picture never taught a place the sound
-            # names says nothing of it), not on the pictures' votes
-            decision = run_encounter(
-                ParallelFusion(config), config, first_acoustic, visual_predictions
-            )
-        else:
-            decision = run_fusion(
-                args.policy, config, first_acoustic[:2], [v[:2] for v in visual_predictions]
-            )
+        # through the pipeline the live engine decides with: a learned net saved with the model
+        # by `train --learned-fusion` (without one, its fallback), or a rule policy
+        policy = (
+            LearnedFusion(config, fusion)
+            if args.policy == "learned"
+            else POLICIES[args.policy](config)
+        )
+        open_roles = [r for r in ("acoustic", "visual") if knows_elsewhere(model.get(r))]
+        decision = run_encounter(policy, config, first_acoustic, visual_predictions, open_roles)
         shared = decision_unit(model.get("acoustic"), model.get("visual"))
-        open_sound = knows_elsewhere(model.get("acoustic"))
-        if decision.scene is not None and open_sound and not decision.not_elsewhere:
-            # as the live engine and the arm: this place and not somewhere else, both senses;
-            # likelier somewhere else, no place (a learned net leaning on the pictures)
-            scores = {
-                "acoustic": first_acoustic[2] or {},
-                "visual": visual_predictions[-1][2] or {},
-            }
-            decision = open_decision(decision, scores, ("acoustic", "visual"), {"acoustic"})
         said = (
             "sure it is here and not elsewhere" if decision.not_elsewhere else "average confidence"
         )

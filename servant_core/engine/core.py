@@ -69,10 +69,10 @@ from servant_core.fusion import (
     FusionConfig,
     FusionPolicy,
     LearnedFusion,
-    ParallelFusion,
     SequentialFusion,
 )
-from servant_core.fusion.elsewhere import beside_open_sound, open_decision, shown, steady_open
+from servant_core.fusion.elsewhere import beside_open_sound, shown
+from servant_core.fusion.pipeline import DecisionPipeline
 from servant_core.fusion.smoothing import SceneSmoother
 from servant_core.library import SceneLibrary
 from servant_core.place_names import place_name
@@ -86,6 +86,8 @@ log = logging.getLogger(__name__)
 # "What is this place?" is asked once the sound has named no taught place for this long: the
 # paper's 30 s acoustic window, so a passing odd moment is never asked about.
 ASK_AFTER_S = 30.0
+
+ROLES = {sense: spec.role for sense, spec in SENSES.items()}  # a sense's name -> its role
 
 NO_MODEL = (
     "no model yet: nothing can be recognised until two scenes are taught (teach mode, key t: "
@@ -161,7 +163,12 @@ class Engine:
         unknown = sorted(set(self.samples) - set(SAMPLE_SENSES))
         if unknown:
             raise ValueError(f"no sample sense named {', '.join(unknown)}")
-        self.fusion: FusionPolicy = fusion if fusion is not None else SequentialFusion()
+        # where every opinion becomes a decision (its policy is `fusion`, its smoother `smoother`)
+        self.decisions = DecisionPipeline(
+            fusion if fusion is not None else SequentialFusion(),
+            smoother,
+            ["acoustic", "visual", *(SENSES[sense].role for sense in self.samples)],
+        )
         self.clock: Callable[[], float] = clock or MonotonicClock()
         self.window_seconds = float(
             window_seconds or getattr(acoustic, "window_seconds", None) or DEFAULT_WINDOW_SECONDS
@@ -172,7 +179,6 @@ class Engine:
         self.fresh_methods = {**FRESH_METHODS, **(fresh_methods or {})}
         self.retrain_needed = False
         self.confidence_threshold = confidence_threshold
-        self.smoother = smoother
         self.ask_after_s = ask_after_s
 
         self._bus = EventBus(self.clock)
@@ -215,21 +221,14 @@ class Engine:
         self._cleanups: list[Callable[[], None]] = []
         self._notes: list[str] = []  # said to every subscriber when the senses open
         self._opened = False
-        self._scores: dict[str, dict[str, float]] = {"acoustic": {}, "visual": {}}
         # Each sense's last opinion: (when, the scene it named or None).
         self._last_named: dict[str, tuple[float, str | None]] = {}
-        self._scores.update({SENSES[sense].role: {} for sense in self.samples})
         self._unknowns = Unknowns()
         # the sound's last windows (and their rates) while it names no taught place, up to
         # `ask_after_s` of them: when "What is this place?" is asked and what its label is for
         self._unknown_windows: deque[tuple[np.ndarray, int]] = deque(
             maxlen=max(1, round(ask_after_s / self.window_seconds))
         )
-        self._open_roles: set[str] = set()  # roles whose probabilities know somewhere else
-        # the last window's probabilities, where the sound knows somewhere else
-        self._previous_window: dict[str, float] | None = None
-        self._previous_far = False  # the last window was far from every taught place
-        self._named_before: str | None = None  # the place the last window named, if any
         self._silent = False  # the last window was silence (its notice was given)
         # the predictions whose last window was skipped as unusable: told once, not each window
         self._skipping: set[str] = set()
@@ -241,6 +240,19 @@ class Engine:
         # how Settings' camera and microphone are opened while running (None: they stay as built)
         self.device_makers: DeviceMakers | None = None
         self._next_audio: AudioSource | None = None  # swapped in on the sense thread
+
+    @property
+    def fusion(self) -> FusionPolicy:
+        """The fusion policy the decision pipeline feeds."""
+        return self.decisions.policy  # type: ignore[no-any-return]
+
+    @fusion.setter
+    def fusion(self, policy: FusionPolicy) -> None:
+        self.decisions.policy = policy
+
+    @property
+    def smoother(self) -> SceneSmoother | None:
+        return self.decisions.smoother
 
     # --- subscribers and status -------------------------------------------------------------
 
@@ -430,28 +442,11 @@ class Engine:
         self._silent = False
         model_rate = getattr(acoustic, "rate", rate)
         X = acoustic.featurize(resample(window, rate, model_rate)[None, :])
-        scene, confidence, scores = _predict(acoustic, X)
         unit = acoustic.confidence_unit
-        if knows_elsewhere(acoustic):
-            # unknown though its probabilities name a place: far from every place taught. Held
-            # steady as the probabilities are: two far windows in a row, not one odd one (on
-            # bench/wearer_day.py a lone far window cost 3 places a twentieth of their right
-            # moves and kept no wrong one away: docs/research.md, issue 21)
-            far = scene == UNKNOWN and sum(scores.values()) > 0.5
-            with self._lock:
-                previous, self._previous_window = self._previous_window, scores
-                far_before, self._previous_far = self._previous_far, far
-                named_before = self._named_before
-            named, scores = steady_open(scores, previous or {}, far and far_before, named_before)
-            with self._lock:
-                self._named_before = named
-            scene = UNKNOWN if named is None else named
-            confidence = 100.0 * scores[named] if named else 0.0
-        elif self.smoother is not None and unit == "%":
-            scene, confidence, scores = self._smoothed(scene == UNKNOWN, scores)
+        open_ = knows_elsewhere(acoustic)
         with self._lock:
-            self._scores["acoustic"] = scores
-            self._note_open("acoustic", acoustic)
+            scene, confidence, scores = self.decisions.hear(*_predict(acoustic, X), unit, open_)
+            self.decisions.note("acoustic", scores, open_)
         known = scene != UNKNOWN
         self._emit(AcousticPrediction(t, scene if known else None, confidence, scores, unit))
         if self._unknown_held(known, window, rate):
@@ -477,7 +472,7 @@ class Engine:
         scores = {str(s): 0.0 for s in acoustic.scenes_}
         with self._lock:
             self._forget_windows()
-            self._scores["acoustic"] = scores
+            self.decisions.scores["acoustic"] = scores
         self._emit(AcousticPrediction(t, None, 0.0, scores, acoustic.confidence_unit))
         with self._lock:
             events = self._judged("audio", None, 0.0, t, scores)
@@ -486,24 +481,9 @@ class Engine:
     def _judged(
         self, sense: str, scene: str | None, confidence: float, t: float, scores: dict[str, float]
     ) -> list[Any]:
-        """A sense's judgement to the fusion policy (called under `_lock`): a policy that takes
-        every sense (`on_sense`, the learned one) hears them all with their probabilities; the
-        rule policies hear sound and pictures only."""
+        """A sense's judgement to the decision pipeline (called under `_lock`)."""
         self._last_named[sense] = (t, scene)
-        on_sense = getattr(self.fusion, "on_sense", None)
-        if on_sense is not None:
-            return list(on_sense(sense, scene, confidence, t, scores))
-        if isinstance(self.fusion, ParallelFusion):
-            # the pictures are evidence, not votes, once the sound knows somewhere else
-            if sense == "audio" and "acoustic" in self._open_roles:
-                return self.fusion.on_acoustic(scene, confidence, t, scores=scores)
-            if sense == "image":
-                return self.fusion.on_visual(scene, confidence, t, scores=scores)
-        if sense == "audio":
-            return self.fusion.on_acoustic(scene, confidence, t)
-        if sense == "image":
-            return self.fusion.on_visual(scene, confidence, t)
-        return []
+        return self.decisions.tell(sense, scene, confidence, t, scores)
 
     def _on_samples(self, sense: str, window: np.ndarray, rate: int) -> None:
         with self._lock:
@@ -515,8 +495,7 @@ class Engine:
         scene, confidence, scores = _predict(recogniser, recogniser.featurize([rows]))
         known = scene != UNKNOWN
         with self._lock:
-            self._scores[SENSES[sense].role] = scores
-            self._note_open(SENSES[sense].role, recogniser)
+            self.decisions.note(SENSES[sense].role, scores, knows_elsewhere(recogniser))
         figure, unit = self._shown(scene if known else None, confidence, scores, recogniser)
         self._emit(SensePrediction(t, sense, scene if known else None, figure, scores, unit))
         if not known and not self._named_elsewhere(sense, t):
@@ -537,11 +516,7 @@ class Engine:
     def _forget_windows(self) -> None:
         """A new acoustic model: what the old one believed about past windows means nothing (and
         a stretch just labelled is not asked about again)."""
-        if self.smoother is not None:
-            self.smoother.reset()
-        self._previous_window = None
-        self._previous_far = False
-        self._named_before = None
+        self.decisions.forget()
         self._unknown_windows.clear()
 
     def _shown(
@@ -552,13 +527,6 @@ class Engine:
             acoustic = self.acoustic
         beside = beside_open_sound(acoustic, recogniser)
         return shown(scene, confidence, recogniser.confidence_unit, scores, beside)
-
-    def _note_open(self, role: str, recogniser: Recogniser) -> None:
-        """Remember whether a role's probabilities leave room for somewhere else (under _lock)."""
-        if knows_elsewhere(recogniser):
-            self._open_roles.add(role)
-        else:
-            self._open_roles.discard(role)
 
     def _unknown_held(self, known: bool, window: np.ndarray, rate: int) -> bool:
         """Whether the sound has named no taught place for `ask_after_s` (this window included):
@@ -573,21 +541,11 @@ class Engine:
         self._unknown_windows.append((window, rate))
         return len(self._unknown_windows) == self._unknown_windows.maxlen
 
-    def _smoothed(self, far: bool, scores: dict[str, float]) -> tuple[str, float, dict[str, float]]:
-        """The window's judgement through the forward filter: (scene or UNKNOWN, confidence in
-        percent, {scene: probability}) of the belief after this window. `far`: the window is
-        unlike every place taught."""
-        assert self.smoother is not None
-        with self._lock:
-            belief = self.smoother.update({UNKNOWN: 1.0} if far else scores)
-        best = max(belief, key=lambda s: belief[s])
-        return best, 100.0 * belief[best], {s: p for s, p in belief.items() if s != UNKNOWN}
-
     def _look(self) -> None:
         t = self.clock()
         with self._lock:
-            events = self.fusion.tick(t)
-            wants = self._sight is not None and self.fusion.wants_picture(t)
+            events = self.decisions.tick(t)
+            wants = self._sight is not None and self.decisions.wants_picture(t)
         self._handle(events)
         self._arm.check(t)
         if not wants:
@@ -607,8 +565,7 @@ class Engine:
         scene, confidence, scores = _predict(visual, X)
         known = scene != UNKNOWN
         with self._lock:
-            self._scores["visual"] = scores
-            self._note_open("visual", visual)
+            self.decisions.note("visual", scores, knows_elsewhere(visual))
             events = self._judged("image", scene if known else None, confidence, t, scores)
         figure, unit = self._shown(scene if known else None, confidence, scores, visual)
         self._emit(VisualPrediction(t, scene if known else None, figure, scores, unit))
@@ -625,27 +582,15 @@ class Engine:
                 self._emit(event)
                 continue
             scene = event.scene
-            roles = tuple(SENSES[s].role for s in event.leaned_on if s in SENSES)
-            roles = roles or ("acoustic", "visual")
             with self._lock:
                 unit = decision_unit(self.acoustic, self.visual)
-                open_roles = set(self._open_roles)
+                event, roles = self.decisions.settle(event, ROLES)
+                latest = self.decisions.latest()  # one snapshot for the figure and the arm
+                open_roles = set(self.decisions.open_roles)
             event = dataclasses.replace(event, confidence_unit=unit)
-            # a sense that knows somewhere else and has spoken has its say, leaned on or not:
-            # pictures alone (a learned net's choice) cannot tell a taught place from elsewhere
-            latest = self.latest_scores()  # one snapshot for the figure and the arm alike
-            heard_open = sorted(r for r in open_roles if latest.get(r))
-            if heard_open and not event.not_elsewhere:
-                roles = tuple(dict.fromkeys([*roles, *heard_open]))
-                # the figure the log, the Scene pane and the arm's threshold share: the
-                # probability of this place and not somewhere else, from every sense; likelier
-                # somewhere else, no place (a learned net, which knows only the taught places,
-                # or the paper's rule)
-                event = open_decision(event, latest, roles, open_roles)
-                if event.scene is None:
-                    self._emit(event)
-                    continue
             self._emit(event)
+            if event.scene is None:
+                continue
             self._arm.act(
                 scene,
                 latest,
@@ -803,7 +748,7 @@ class Engine:
     def latest_scores(self) -> dict[str, dict[str, float]]:
         """The last per-scene scores: {"acoustic": {scene: p}, "visual": {scene: p}}."""
         with self._lock:
-            return {sense: dict(scores) for sense, scores in self._scores.items()}
+            return self.decisions.latest()
 
     # --- learning (see `learning`) ------------------------------------------------------------
 

@@ -4,12 +4,13 @@ A policy is fed predictions with their times and returns the events it produces 
 `FusionState`); time is always passed in, so tests run in no wall time. The learned policy also
 takes any sense's opinion with its scores (`LearnedFusion.on_sense`), and `scores=` on
 `on_acoustic`/`on_visual`; built from the registry with a config alone it has no net and
-decides as the parallel policy.
+decides as the parallel policy. Who feeds a policy is `fusion.pipeline.DecisionPipeline`, for
+the live engine and the command line alike.
 """
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import ClassVar, Protocol
 
 from servant_core.choices import DEFAULT_POLICY
 from servant_core.events import Decision, FusionState
@@ -19,6 +20,9 @@ from servant_core.fusion.sequential import FusionConfig, SequentialFusion, scene
 
 
 class FusionPolicy(Protocol):
+    hears_every_sense: ClassVar[bool]  # takes `on_sense(sense, scene, confidence, t, scores)`
+    weighs_scores: ClassVar[bool]  # takes `scores=` on `on_acoustic` and `on_visual`
+
     def on_acoustic(
         self, scene: str | None, confidence: float, t: float
     ) -> list[Decision | FusionState]: ...

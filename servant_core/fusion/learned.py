@@ -483,6 +483,8 @@ class LearnedFusion(AcousticWindow):
     every call goes to a `ParallelFusion`: the rule policy is the fallback.
     """
 
+    hears_every_sense = True
+
     def __init__(
         self,
         config: FusionConfig | None = None,

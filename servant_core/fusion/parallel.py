@@ -33,6 +33,8 @@ from servant_core.recognisers.base import UNKNOWN
 
 
 class ParallelFusion(AcousticWindow):
+    weighs_scores = True
+
     def __init__(
         self,
         config: FusionConfig | None = None,

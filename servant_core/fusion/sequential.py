@@ -12,6 +12,7 @@ acoustic predictions are ignored, as in the paper, which does not listen while i
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from typing import ClassVar
 
 from servant_core.choices import FusionConfig
 from servant_core.events import Decision, FusionState
@@ -36,6 +37,11 @@ class AcousticWindow(ABC):
     config: FusionConfig
     opened_at: float | None
     acoustic_confidence: float
+    # what a policy can hear (`fusion.pipeline.DecisionPipeline.tell`): any sense's opinion with
+    # its scores (`on_sense`), and the sound's and pictures' scores (`scores=`) as evidence once
+    # the sound knows somewhere else
+    hears_every_sense: ClassVar[bool] = False
+    weighs_scores: ClassVar[bool] = False
 
     @abstractmethod
     def _restart(self) -> None: ...
