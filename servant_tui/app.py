@@ -30,13 +30,21 @@ from servant_core.events import (
 from servant_core.fusion.elsewhere import LIKELIER_UNIT
 from servant_core.storage import data_dir
 from servant_tui.heap import release_free_heap
-from servant_tui.messages import EngineEvent, SensorUpdate, SpectrumUpdate, TrainingDone
+from servant_tui.messages import (
+    EngineEvent,
+    RecordingStopped,
+    SensorUpdate,
+    SpectrumUpdate,
+    TrainingDone,
+)
 from servant_tui.screens.dialogs import HelpScreen, LabelPrompt
 from servant_tui.screens.live import LiveScreen, device_message
 from servant_tui.widgets.scene import heard_by, leaned_text
 from servant_tui.widgets.text import clock, error_text
 
 if TYPE_CHECKING:
+    from threading import Event
+
     import numpy as np
 
     from servant_core.library import SceneLibrary
@@ -67,9 +75,12 @@ class EngineLike(Protocol):
     def apply_settings(self, settings: Any) -> None: ...
     def set_action_learner(self, pose_for: Any) -> None: ...
     def read_arm_pose(self) -> dict[str, float]: ...
-    def record_window(self, seconds: float) -> np.ndarray: ...
+    # both end at once, raising ServantError, when `cancel` is set (teach mode closing)
+    def record_window(
+        self, seconds: float, timeout: float | None = None, cancel: Event | None = None
+    ) -> np.ndarray: ...
     def record_samples(
-        self, sense: str, seconds: float, timeout: float | None
+        self, sense: str, seconds: float, timeout: float | None, cancel: Event | None = None
     ) -> tuple[np.ndarray, int]: ...
     def take_picture(self) -> np.ndarray: ...
     def retrain(self, library: SceneLibrary) -> Any: ...
@@ -182,6 +193,14 @@ class ServantApp(App[None]):
             from servant_core.engine import pose_for_taught
 
             self.engine.set_action_learner(pose_for_taught(message.learner))
+
+    @on(RecordingStopped)
+    def _recording_stopped(self, message: RecordingStopped) -> None:
+        self.log_line(
+            None,
+            f"[yellow]teach mode closed while recording {escape(message.scene)}: that "
+            "recording was stopped and not kept[/]",
+        )
 
     # -- the engine side -------------------------------------------------------------------------
 

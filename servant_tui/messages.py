@@ -56,6 +56,15 @@ class RecordingDone(Message):
         self.samples = samples
 
 
+class RecordingStopped(Message):
+    """A teach window's recording was stopped before its end (teach mode closed, or the app
+    quit) and nothing of it was written. Posted to the app: the screen is gone by then."""
+
+    def __init__(self, scene: str) -> None:
+        super().__init__()
+        self.scene = scene
+
+
 class PictureTaken(Message):
     """A teach picture was taken and saved into the scene library."""
 

@@ -228,11 +228,17 @@ class ReplayEngine:
         raise ServantError("arm: this engine cannot read the arm's pose; type the angles")
 
     def record_samples(
-        self, sense: str, seconds: float, timeout: float | None = None
+        self,
+        sense: str,
+        seconds: float,
+        timeout: float | None = None,
+        cancel: threading.Event | None = None,
     ) -> tuple[np.ndarray, int]:
         raise ServantError(f"{sense}: no readings to record in this replay")
 
-    def record_window(self, seconds: float) -> np.ndarray:
+    def record_window(
+        self, seconds: float, timeout: float | None = None, cancel: threading.Event | None = None
+    ) -> np.ndarray:
         """The next `seconds` of the replayed source (a recording the test hands in)."""
         if self.window_source is None:
             raise ServantError("microphone: no audio source in this replay")

@@ -699,18 +699,22 @@ class Engine:
         return self._hearing.rate if self._hearing is not None else 0
 
     def record_window(
-        self, seconds: float = DEFAULT_WINDOW_SECONDS, timeout: float | None = None
+        self,
+        seconds: float = DEFAULT_WINDOW_SECONDS,
+        timeout: float | None = None,
+        cancel: threading.Event | None = None,
     ) -> np.ndarray:
         """Record the next `seconds` of audio from now (blocks until they have arrived).
 
-        Returns mono float32 at `audio_rate`. Raises ServantError without a working audio source
-        or if the audio does not arrive within `timeout` (default: twice `seconds` plus 2 s).
+        Returns mono float32 at `audio_rate`. Raises ServantError without a working audio source,
+        if the audio does not arrive within `timeout` (default: twice `seconds` plus 2 s), or at
+        once when `cancel` is set or the engine stops meanwhile (nothing is returned then).
         """
         if not self.running:
             raise ServantError("engine: not running; start it before recording")
         if self._hearing is None:
             raise ServantError("microphone: no sound to record; check the microphone (see status)")
-        window = self._hearing.record(seconds, timeout)
+        window = self._hearing.record(seconds, timeout, cancel)
         if is_silent(window):  # a place taught as silence would be named wherever it is quiet
             raise ServantError(
                 f"microphone: the recording is silence (below {SILENT_DBFS:.0f} dBFS) and was not "
@@ -719,15 +723,20 @@ class Engine:
         return window
 
     def record_samples(
-        self, sense: str, seconds: float = DEFAULT_WINDOW_SECONDS, timeout: float | None = None
+        self,
+        sense: str,
+        seconds: float = DEFAULT_WINDOW_SECONDS,
+        timeout: float | None = None,
+        cancel: threading.Event | None = None,
     ) -> tuple[np.ndarray, int]:
         """Record the next `seconds` of a sample sense's readings from now: ((n, channels)
-        float32, rows per second). ServantError if the sense is not in use or not working."""
+        float32, rows per second). ServantError if the sense is not in use or not working, or
+        at once when `cancel` is set or the engine stops meanwhile."""
         if not self.running:
             raise ServantError("engine: not running; start it before recording")
         for feeling in self._feelings:
             if feeling.sense.name == sense:
-                return feeling.record(seconds, timeout), feeling.source.rate
+                return feeling.record(seconds, timeout, cancel), feeling.source.rate
         raise ServantError(f"{sense}: not in use; start with its sensor (e.g. --imu PORT)")
 
     @property

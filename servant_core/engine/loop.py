@@ -10,6 +10,7 @@ replay goes on with the next.
 from __future__ import annotations
 
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -27,6 +28,14 @@ from servant_core.senses import Sense
 SPECTRUM_SIZE = 2048
 SPECTRUM_FPS = 30.0
 RING_SECONDS = 30.0  # what the ring holds: a window being cut while teach mode records 5 s
+# How often a recording waiting for its seconds looks whether it was asked to stop: the front
+# end's request is a plain event, which cannot wake the wait itself (teach mode's `q` waited out
+# the whole timeout, 12 s of blank terminal).
+STOP_CHECK_SECONDS = 0.05
+
+
+def stopped_text(seconds: float) -> str:
+    return f"recording: stopped before its {seconds:g} s were in, and not kept"
 
 
 def spectrum_db(samples: np.ndarray, rate: int) -> tuple[np.ndarray, np.ndarray]:
@@ -160,8 +169,11 @@ class Hearing:
             self._next_window_end += size
             self.on_window(ring.read(end - size, end), rate)
 
-    def record(self, seconds: float, timeout: float | None) -> np.ndarray:
-        """The next `seconds` of audio from now (blocks until they have arrived)."""
+    def record(
+        self, seconds: float, timeout: float | None, cancel: threading.Event | None = None
+    ) -> np.ndarray:
+        """The next `seconds` of audio from now (blocks until they have arrived, `cancel` is
+        set, or the microphone closes)."""
         ring = self.ring
         if ring is None or not self.ok:
             raise ServantError("microphone: no sound to record; check the microphone (see status)")
@@ -169,8 +181,16 @@ class Hearing:
         if count > ring.capacity:
             raise ServantError(f"engine: cannot record more than {RING_SECONDS:g} s at once")
         end = ring.total + count
-        if not ring.wait_for(end, timeout if timeout is not None else 2 * seconds + 2):
-            raise ServantError(f"{self.source.name}: the sound stopped while recording; try again")
+        deadline = time.monotonic() + (timeout if timeout is not None else 2 * seconds + 2)
+        while not ring.wait_for(end, STOP_CHECK_SECONDS):
+            if cancel is not None and cancel.is_set():
+                raise ServantError(stopped_text(seconds))
+            # closed (the engine stopping) or failed: no more sound comes into the ring, and
+            # sound after a reopening would be stitched to this across the gap
+            if not self.ok or time.monotonic() >= deadline:
+                raise ServantError(
+                    f"{self.source.name}: the sound stopped while recording; try again"
+                )
         return ring.read(end - count, end)
 
 
@@ -368,17 +388,24 @@ class Feeling:
                 self._kept_rows -= len(self._kept.popleft())
             self._arrived.notify_all()
 
-    def record(self, seconds: float, timeout: float | None) -> np.ndarray:
-        """The next `seconds` of readings from now (blocks until they have arrived)."""
+    def record(
+        self, seconds: float, timeout: float | None, cancel: threading.Event | None = None
+    ) -> np.ndarray:
+        """The next `seconds` of readings from now (blocks until they have arrived, `cancel` is
+        set, or the source closes)."""
         if not self.ok:
             raise ServantError(f"{self.device}: no readings to record; check it (see status)")
         count = int(round(seconds * self.source.rate))
         with self._arrived:
             end = self._total + count
-            self._arrived.wait_for(
-                lambda: self._total >= end or not self.ok,
-                timeout if timeout is not None else 2 * seconds + 2,
-            )
+            deadline = time.monotonic() + (timeout if timeout is not None else 2 * seconds + 2)
+            while not self._arrived.wait_for(
+                lambda: self._total >= end or not self.ok, STOP_CHECK_SECONDS
+            ):
+                if cancel is not None and cancel.is_set():
+                    raise ServantError(stopped_text(seconds))
+                if time.monotonic() >= deadline:
+                    break
             if self._total < end:
                 raise ServantError(f"{self.source.name}: the readings stopped; try again")
             rows = np.concatenate(self._kept)

@@ -36,6 +36,7 @@ from textual.widgets import (
     Sparkline,
     Static,
 )
+from textual.worker import get_current_worker
 
 from servant_core.audio import DEFAULT_WINDOW_SECONDS, write_wav
 from servant_core.capture.sample_files import write_sample_csv
@@ -51,6 +52,7 @@ from servant_core.storage import atomic_write_bytes
 from servant_tui.messages import (
     PictureTaken,
     RecordingDone,
+    RecordingStopped,
     RetrainDone,
     TrainingDone,
     TrainingProgress,
@@ -358,8 +360,16 @@ class TeachScreen(ReportsWorkerErrors):
         sample sense beside it (`….imu.csv`, `….ambient.csv`). The sample senses record in
         parallel with the sound, each on a thread of its own, since each records the seconds
         from when it is asked. A sensor that fails loses only its own log: the sound is kept,
-        and the failure is one line in the log and a notification."""
-        engine = self.app.engine
+        and the failure is one line in the log and a notification.
+
+        Teach mode closing (Escape, or the app quitting) stops the recording at once: Textual
+        sets this worker's cancelled event as the screen goes, and the engine's recordings
+        watch it (`q` waited out the recording's 12 s timeout on a blank terminal, the engine
+        stopped). Nothing of a stopped recording is written, and the screen, gone, is not
+        touched again: the app says so in the log."""
+        stop = get_current_worker().cancelled_event
+        app = self.app  # a screen that has gone no longer knows its app
+        engine = app.engine
         senses = self.sample_senses()
         folder, name = self.root / scene, stamp()
         try:
@@ -370,30 +380,49 @@ class TeachScreen(ReportsWorkerErrors):
                         sense,
                         DEFAULT_WINDOW_SECONDS,
                         DEFAULT_WINDOW_SECONDS + SAMPLE_GRACE_SECONDS,
+                        stop,
                     )
                     for sense in senses
                 }
-                audio = np.asarray(engine.record_window(DEFAULT_WINDOW_SECONDS), dtype=np.float32)
+                sound = engine.record_window(DEFAULT_WINDOW_SECONDS, cancel=stop)
+                if stop.is_set():  # in full as teach mode closed: it is not kept either
+                    raise ServantError("teach: closed while recording")
+                audio = np.asarray(sound, dtype=np.float32)
                 rate = engine.audio_rate
                 path = write_wav(folder / f"{name}.wav", audio, rate)
-                logs = [self._write_log(folder, name, s, f, path) for s, f in feeling.items()]
+                logs = [self._write_log(folder, name, s, f, path, stop) for s, f in feeling.items()]
+        except ServantError:
+            if stop.is_set():
+                app.post_message(RecordingStopped(scene))
+                return
+            raise
         finally:
-            self.app.call_from_thread(self._recording_over)
+            if not stop.is_set():
+                app.call_from_thread(self._recording_over)
         written = tuple(log for log in logs if log is not None)
         self.post_message(RecordingDone(path, len(audio) / rate, written))
 
     def _write_log(
-        self, folder: Path, name: str, sense: str, recording: Future[Any], sound: Path
+        self,
+        folder: Path,
+        name: str,
+        sense: str,
+        recording: Future[Any],
+        sound: Path,
+        stop: threading.Event,
     ) -> Path | None:
         """Write a sample sense's recording beside the sound; None (said in one line) if the
-        sensor failed."""
+        sensor failed, or (not said: the screen is going) if teach mode closed meanwhile."""
         try:
             rows, rate = recording.result()
         except ServantError as error:
-            self.app.call_from_thread(
-                self.app.report_error,
-                ServantError(f"{sense}: not recorded ({error}); the sound {sound.name} was kept"),
-            )
+            if not stop.is_set():
+                self.app.call_from_thread(
+                    self.app.report_error,
+                    ServantError(
+                        f"{sense}: not recorded ({error}); the sound {sound.name} was kept"
+                    ),
+                )
             return None
         kind = SENSES[sense]
         return write_sample_csv(folder / f"{name}{kind.suffixes[0]}", rows, rate, str(kind.stream))
