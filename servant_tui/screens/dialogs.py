@@ -35,7 +35,7 @@ for it. The **live** screen shows:
 | `s` | settings: devices, joints, fusion windows |
 | `ctrl+p` | the command palette |
 | `escape` | back to the live screen |
-| `q` | quit (stops capture, closes the serial port) |
+| `q` | quit (stops capture, closes the serial port); `ctrl+q` while typing in a field |
 """
 
 

@@ -23,7 +23,7 @@ from servant_tui.messages import EvaluationDone, RetrainDone
 from servant_tui.screens.dialogs import Confirm, ScenePrompt
 from servant_tui.screens.secondary import HELP_AND_QUIT, ReportsWorkerErrors, with_progress
 from servant_tui.widgets.progress import OnProgress, WorkProgress
-from servant_tui.widgets.text import error_text
+from servant_tui.widgets.text import error_text, path_text
 
 
 def free_path(folder: Path, name: str) -> Path:
@@ -230,7 +230,8 @@ class LibraryScreen(ReportsWorkerErrors):
         saved = self.app.engine.model_path
         self.post_message(
             RetrainDone(
-                retrained_text(senses, library) + (f"; model saved to {saved}" if saved else "")
+                retrained_text(senses, library)
+                + (f"; model saved to {path_text(saved)}" if saved else "")
             )
         )
 

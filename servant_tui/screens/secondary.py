@@ -28,9 +28,15 @@ if TYPE_CHECKING:
 # The app's help and quit, listed again so a screen's footer shows them right after its own keys;
 # the app's other keys work here too but are not listed (at 80 columns the footer has room for a
 # handful), and help takes both its keys, or the app's f1 would list "? Help" a second time.
+# The footer shows an action's first key that works where the focus is: `?` and `q`, and while
+# the focus takes typed letters (a field; Textual leaves it the keys it consumes, and `q` typed
+# a q into teach mode's name field while the footer said `q Quit`), f1 and ctrl+q. Ctrl+q has
+# priority, as Textual's own has, which would otherwise take its place in the footer, unshown.
 HELP_AND_QUIT = [
-    Binding("question_mark,f1", "app.help", "Help", key_display="?"),
+    Binding("question_mark", "app.help", "Help", key_display="?"),
+    Binding("f1", "app.help", "Help"),
     Binding("q", "app.quit", "Quit"),
+    Binding("ctrl+q", "app.quit", "Quit", priority=True),
     Binding("a", "app.toggle_arm", "Arm/Disarm", show=False),
     Binding("t", "app.teach", "Teach", show=False),
     Binding("l", "app.library", "Library", show=False),

@@ -102,13 +102,22 @@ class KnownScenes(Select[str]):
     took the letters and Enter opened it. Keys come from the terminal in a burst, all given to
     the list before the first moves the focus, so every letter the list gets is passed on."""
 
+    def passes_on(self, character: str | None) -> bool:
+        """Whether a key typed here goes to the name's field: a letter, not Enter, space or an
+        arrow (they still open the list), and not while the list is open."""
+        typed = character or ""
+        return not self.expanded and typed.isprintable() and bool(typed.strip())
+
+    def check_consume_key(self, key: str, character: str | None = None) -> bool:
+        # the letters are the name's, like a field's: the footer offers no key they type
+        return self.passes_on(character)
+
     def on_key(self, event: events.Key) -> None:
-        typed = event.character or ""
-        if self.expanded or not (typed.isprintable() and typed.strip()):
-            return  # Enter, space and the arrows still open the list
+        if not self.passes_on(event.character):
+            return
         field = self.screen.query_one("#new-scene", Input)
         self.screen.set_focus(field)
-        field.insert_text_at_cursor(typed)
+        field.insert_text_at_cursor(event.character or "")
         event.stop()
 
 

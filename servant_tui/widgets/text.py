@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from rich.text import Text
 
 from servant_core.errors import ServantError
@@ -22,6 +24,14 @@ def bar(fraction: float, width: int, style: str = "green") -> Text:
     partial = " ▏▎▍▌▋▊▉"[rest] if full < width else ""
     filled = "█" * full + partial.strip()
     return Text.assemble((filled, style), ("·" * (width - len(filled)), "grey35"))
+
+
+def path_text(path: Path) -> str:
+    """A path as the user reads it, their home folder as ~ (what a shell would accept)."""
+    try:
+        return f"~/{path.relative_to(Path.home())}"
+    except (ValueError, RuntimeError):  # elsewhere, or no home to be found
+        return str(path)
 
 
 def error_text(error: BaseException) -> str:
