@@ -69,6 +69,7 @@ from servant_core.features.logmel import log_mel_frames  # noqa: E402
 from servant_core.library import SceneLibrary, WindowFeatures, iter_recording_windows  # noqa: E402
 from servant_core.recognisers import make_audio_recogniser  # noqa: E402
 from servant_core.recognisers.background import kept_out  # noqa: E402
+from servant_core.recognisers.base import TaughtPlacesOnly  # noqa: E402
 
 RATE = 22050
 WINDOW_SECONDS = 5.0
@@ -99,7 +100,7 @@ def logmel_stats(windows: np.ndarray) -> np.ndarray:
     return np.array(rows)
 
 
-class Peer:
+class Peer(TaughtPlacesOnly):
     """A scikit-learn pipeline as a recogniser; its grid searched by grouped cross-validation.
 
     Rows carry their source's number in the last column (the groups of the search)."""

@@ -49,6 +49,7 @@ from peers import (  # noqa: E402
 from servant_core.cli import library_noise_silenced  # noqa: E402
 from servant_core.evaluate import evaluate_windows  # noqa: E402
 from servant_core.library import SceneLibrary  # noqa: E402
+from servant_core.recognisers.base import TaughtPlacesOnly  # noqa: E402
 
 
 def nuisance_directions(
@@ -88,7 +89,7 @@ class SourceProjection(TransformerMixin, BaseEstimator):
         return z - (z @ self.directions_.T) @ self.directions_
 
 
-class NapPeer:
+class NapPeer(TaughtPlacesOnly):
     """log-mel + NAP + logistic regression; k and C by CV grouped by source (last column)."""
 
     def __init__(self, ks: list[int]) -> None:

@@ -54,6 +54,32 @@ class Recogniser(Protocol):
     @classmethod
     def from_state(cls, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> Self: ...
 
+    # What it can be asked beyond scikit-learn's classifier, declared (`TaughtPlacesOnly` gives
+    # the answers of a recogniser that knows only the taught places): whether its open
+    # probabilities leave room for somewhere else, those probabilities, and all three answers
+    # the live engine asks of a row at once.
+    @property
+    def knows_elsewhere(self) -> bool: ...
+    def open_proba(self, X: np.ndarray) -> np.ndarray: ...
+    def answers(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+
+class TaughtPlacesOnly:
+    """The answers of a recogniser that knows only the places it was taught (a mixin for the
+    paper's recognisers, the centroids' and the benches' peers): no room for somewhere else,
+    its open probabilities its shares, its names `predict`'s."""
+
+    knows_elsewhere: ClassVar[bool] = False
+
+    def open_proba(self, X: np.ndarray) -> np.ndarray:
+        return np.asarray(self.predict_proba(X), dtype=float)  # type: ignore[attr-defined]
+
+    def answers(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(`predict`, `confidence`, `predict_proba`) of rows `X`."""
+        names = np.asarray(self.predict(X)).astype(str)  # type: ignore[attr-defined]
+        confidence = np.asarray(self.confidence(X), dtype=np.float64)  # type: ignore[attr-defined]
+        return names, confidence, self.open_proba(X)
+
 
 class AcousticRecogniser(Recogniser, Protocol):
     """An audio recogniser also says at what rate and window length it featurizes windows."""
@@ -175,27 +201,20 @@ def scene_probabilities(
     return np.where(total > 0, probs / np.where(total > 0, total, 1.0), uniform)
 
 
-def open_probabilities(recogniser: Any, X: np.ndarray) -> np.ndarray:
+def open_probabilities(recogniser: Recogniser, X: np.ndarray) -> np.ndarray:
     """(n, scenes): each taught place's probability and not somewhere else, where the recogniser
     knows somewhere else (`open_proba`); otherwise its shares among the taught places."""
-    open_proba = getattr(recogniser, "open_proba", None)
-    return np.asarray(open_proba(X) if open_proba else recogniser.predict_proba(X), dtype=float)
+    return np.asarray(recogniser.open_proba(X), dtype=float)
 
 
-def open_predict(recogniser: Any, X: np.ndarray) -> np.ndarray:
+def open_predict(recogniser: Recogniser, X: np.ndarray) -> np.ndarray:
     """`predict`, and `UNKNOWN` too where the recogniser knows somewhere else and gives it half
     the probability or more (the wearer is more likely in a place not taught than in any taught)
     or, where it has one, its acceptance check says the row is unlike what its place was taught
     on (`birdnet`'s nearest taught window). What the live engine, `servant predict` and the
     arm go by; `predict` alone says which taught place a row is likeliest (what the evaluation
     protocols score)."""
-    at_once = getattr(recogniser, "answers", None)
-    if at_once is not None:  # its own open names, acceptance checks and all
-        return np.asarray(at_once(X)[0]).astype(str)
-    names = np.asarray(recogniser.predict(X)).astype(object)
-    if knows_elsewhere(recogniser):
-        names = elsewhere_unnamed(names, open_probabilities(recogniser, X))
-    return names.astype(str)
+    return np.asarray(recogniser.answers(X)[0]).astype(str)
 
 
 def elsewhere_unnamed(names: np.ndarray, open_p: np.ndarray) -> np.ndarray:
@@ -206,23 +225,15 @@ def elsewhere_unnamed(names: np.ndarray, open_p: np.ndarray) -> np.ndarray:
     return names
 
 
-def answers(recogniser: Any, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(`open_predict`, `confidence`, `open_probabilities`) of rows `X`: in one pass where the
-    recogniser answers all three at once (its `answers`), else asked one by one."""
-    at_once = getattr(recogniser, "answers", None)
-    if at_once is not None:
-        answered: tuple[np.ndarray, np.ndarray, np.ndarray] = at_once(X)
-        return answered
-    return (
-        open_predict(recogniser, X),
-        np.asarray(recogniser.confidence(X), dtype=float),
-        open_probabilities(recogniser, X),
-    )
+def answers(recogniser: Recogniser, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(`open_predict`, `confidence`, `open_probabilities`) of rows `X`, in one pass."""
+    return recogniser.answers(X)
 
 
-def knows_elsewhere(recogniser: Any) -> bool:
-    """Whether the recogniser's `open_probabilities` leave room for somewhere else."""
-    return bool(getattr(recogniser, "knows_elsewhere", False))
+def knows_elsewhere(recogniser: Recogniser | None) -> bool:
+    """Whether the recogniser's `open_probabilities` leave room for somewhere else (None: no
+    recogniser, no room)."""
+    return recogniser is not None and bool(recogniser.knows_elsewhere)
 
 
 def init_params(estimator: Any) -> dict[str, Any]:

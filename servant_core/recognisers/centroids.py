@@ -26,6 +26,7 @@ from sklearn.metrics.pairwise import euclidean_distances
 from servant_core.recognisers.base import (
     PERCENT,
     UNKNOWN,
+    TaughtPlacesOnly,
     check_training_scenes,
     cluster_spreads,
     scene_probabilities,
@@ -160,7 +161,7 @@ class SceneCentroids:
         )
 
 
-class CentroidRecogniser:
+class CentroidRecogniser(TaughtPlacesOnly):
     """A recogniser whose learned part is codebooks (subclass) plus a `SceneCentroids` head.
 
     Subclasses define `featurize`, `params()`, `_fit_codebooks(X)` (learn from featurized

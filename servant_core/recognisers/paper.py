@@ -22,6 +22,7 @@ from servant_core.features.paper_fft import paper_fft_vectors
 from servant_core.recognisers.base import (
     UNKNOWN,
     ClusterLabels,
+    TaughtPlacesOnly,
     check_training_scenes,
     cluster_spreads,
     init_params,
@@ -35,7 +36,7 @@ def paper_confidence(distance: np.ndarray | float, divisor: float) -> np.ndarray
     return 100.0 - np.asarray(distance, dtype=float) / divisor
 
 
-class KMeansSceneRecogniser:
+class KMeansSceneRecogniser(TaughtPlacesOnly):
     """K-Means with K = number of scenes over featurized rows; shared by both paper senses."""
 
     method: ClassVar[str] = "paper"
