@@ -62,7 +62,10 @@ class DefaultsFormatter(argparse.HelpFormatter):
 
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""
-        shown = action.default not in (None, False, argparse.SUPPRESS, [])
+        default = action.default
+        # by identity: a default of 0 equals False and 0.0 equals it too, yet says something
+        shown = not (default is None or default is False or default is argparse.SUPPRESS)
+        shown = shown and default != []
         if shown and "default" not in text and action.option_strings:
             text += " (default: %(default)s)"
         return text

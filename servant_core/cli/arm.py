@@ -87,7 +87,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     query.set_defaults(handler=run_query)
 
     emulate = subparsers.add_parser("emulate-servo")
-    emulate.add_argument("--protocol", choices=sorted(PROTOCOLS), default="maestro")
+    emulate.add_argument(
+        "--protocol", choices=sorted(PROTOCOLS), default="maestro", help="the controller to emulate"
+    )
     emulate.add_argument("--link", help="also make this path a symlink to the port (a stable name)")
     emulate.add_argument(
         "--seconds",
