@@ -24,10 +24,13 @@ def place(scene: str | None) -> str:
 
 
 def confidence_text(confidence: float, unit: str | None, width: int = 0) -> str:
-    """The confidence and its unit ("88.0 %", "-6434.0 eq. 1"), or the bare number when the unit
-    is not known; the number is right-aligned in at least `width` characters."""
+    """The confidence and its unit ("88.0 %", "-6434.0 eq. 1", "1.8× average": a factor keeps
+    its ×), or the bare number when the unit is not known; the number is right-aligned in at
+    least `width` characters."""
     number = f"{confidence:{width}.1f}"
-    return f"{number} {unit}" if unit else number
+    if not unit:
+        return number
+    return f"{number}{unit}" if unit.startswith("×") else f"{number} {unit}"
 
 
 def angle_text(angle: float) -> str:

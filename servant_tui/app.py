@@ -27,7 +27,6 @@ from servant_core.events import (
     UnknownScene,
     VisualPrediction,
 )
-from servant_core.fusion.elsewhere import LIKELIER_UNIT
 from servant_core.storage import data_dir
 from servant_tui.heap import release_free_heap
 from servant_tui.messages import (
@@ -110,10 +109,7 @@ HEAP_TRIM_EVERY_S = 60.0
 def log_confidence(event: Any) -> str:
     """A confidence for the log, its unit bound to its number: the log wraps at spaces, and
     "(67.5" at the end of one row with "%)" alone on the next reads badly."""
-    text = confidence_text(event.confidence, event.confidence_unit).replace(" %", "%")
-    if event.confidence_unit == LIKELIER_UNIT:  # "1.8× average": the number keeps its ×
-        text = text.replace(" ×", "×")
-    return text
+    return confidence_text(event.confidence, event.confidence_unit).replace(" %", "%")
 
 
 class ServantApp(App[None]):

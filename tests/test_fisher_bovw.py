@@ -280,6 +280,6 @@ def test_servant_predict_shows_a_taught_picture_clearly_above_average(shared_dat
     result = servant("predict", str(model), "--image", *map(str, taught[:3]))
     assert result.returncode == 0, result.stderr
     seen = [line for line in result.stdout.splitlines() if line.startswith("Visual")]
-    shown = [re.search(r"cafe \(confidence ([\d.]+) × average\)", line) for line in seen]
+    shown = [re.search(r"cafe \(confidence ([\d.]+)× average\)", line) for line in seen]
     figures = [float(found[1]) for found in shown if found]
     assert len(figures) == 3 and min(figures) > 1.3, result.stdout

@@ -23,7 +23,7 @@ from tests.test_live_path import picture_video
 from tests.test_tui_live import settle
 
 # the Scene pane's row (the log's lines read "sees cafe (2.0× average)")
-SEES = re.compile(r"sees\s+(\w+)\s+([\d.]+) × average")
+SEES = re.compile(r"sees\s+(\w+)\s+([\d.]+)× average")
 
 
 def screen_text(app: ServantApp) -> str:
