@@ -29,6 +29,7 @@ The picture rows come from `bench/picture_peers.py` (`picture_rows`) when it is 
 
     OMP_NUM_THREADS=1 python bench/peers.py [--data ../shared/data] [--seeds 1] [--json FILE]
         [--protocols source,recording] [--methods kmeans-encoder,...] [--no-pictures]
+        [--audio ../shared/data/audio/tut2017]
 """
 
 from __future__ import annotations
@@ -213,12 +214,12 @@ def protocol_plans(
 
 
 def audio_rows(
-    data_root: Path,
+    audio_root: Path,
     seeds: int,
     protocols: tuple[str, ...] = PROTOCOLS,
     methods: tuple[str, ...] | None = None,
 ) -> list[dict[str, Any]]:
-    library = SceneLibrary.scan(data_root / "audio" / "dev")
+    library = SceneLibrary.scan(audio_root)
     servant = {m: make_audio_recogniser(m, rate=RATE) for m in SERVANT_METHODS}
     featurizers: dict[str, Callable[[np.ndarray], np.ndarray]] = {
         name: featurize for name, (featurize, _) in PEERS.items()
@@ -290,6 +291,12 @@ def main() -> None:
     parser.add_argument("--json", type=Path, help="also write every row here")
     parser.add_argument("--no-pictures", action="store_true", help="audio rows only")
     parser.add_argument(
+        "--audio",
+        type=Path,
+        help="the recordings' library (default: DATA/audio/dev; DATA/audio/tut2017 is the DCASE "
+        "2017 clips, whose source is the recording location)",
+    )
+    parser.add_argument(
         "--protocols",
         type=lambda text: tuple(text.split(",")),
         default=PROTOCOLS,
@@ -305,10 +312,9 @@ def main() -> None:
     unknown = set(args.protocols) - set(PROTOCOLS)
     if unknown:
         parser.error(f"no column {', '.join(sorted(unknown))}; choose from {', '.join(PROTOCOLS)}")
-    rows = audio_rows(args.data, args.seeds, args.protocols, args.methods)
-    print(
-        f"audio: {args.data / 'audio' / 'dev'}, balanced accuracy (± std over {args.seeds} seeds)"
-    )
+    audio = args.audio or args.data / "audio" / "dev"
+    rows = audio_rows(audio, args.seeds, args.protocols, args.methods)
+    print(f"audio: {audio}, balanced accuracy (± std over {args.seeds} seeds)")
     print(table(rows, figure))
     print("\naudio: log loss")
     print(table(rows, lambda r: f"{r['log_loss']:.2f}"))
