@@ -16,6 +16,14 @@ in Settings while the app runs (step 1: no restart).
 3. Retrain: Ctrl-N to *Train*, Enter (the poses), Enter (*Retrain recognisers*).
 4. Arm: escape, `a`: ARMED.
 5. Watch: walk into the café: `CafeScene detected`, and the emulator receives the café's pose.
+
+Then the README's command line (issue 39), in the same shell, on what teach mode left:
+
+6. `servant train LIBRARY`, its first example, on the library teach mode wrote: the model teach
+   mode saved is not replaced (one line naming --force and -o, exit status 2), and still loads.
+7. `servant run --headless --arm` loads that model. The wearer walks onto the street, past a gym
+   never taught, into the café: one line for each decision, the gym explained once with how to
+   teach it, and the controller receives one pose per decision, never a pose it holds already.
 """
 
 from __future__ import annotations
@@ -33,7 +41,9 @@ import numpy as np
 import pytest
 
 from servant_core.demo.scenes import synth_picture
+from servant_core.engine import NO_MODEL
 from servant_core.library import TEACH_WINDOWS
+from servant_core.modelfile import load_model
 from tests.test_live_path import POSES, scene_sound
 from tests.test_microphone import play
 from tests.test_microphone import virtual_mic as virtual_mic  # a fixture
@@ -97,8 +107,37 @@ class Terminal:
             self.tmux("send-keys", "-t", f"readme:{window}", key)
             time.sleep(0.3)
 
-    def screen(self, window: str) -> str:
-        return self.tmux("capture-pane", "-p", "-J", "-S", "-200", "-t", f"readme:{window}")
+    def screen(self, window: str, start: str = "-200") -> str:
+        """The window's text from `start` (a line of its history; "-": all of it) to its end."""
+        return self.tmux("capture-pane", "-p", "-J", "-S", start, "-t", f"readme:{window}")
+
+    def clear(self, window: str) -> None:
+        """An empty screen and history: what follows is the next command's alone."""
+        self.type(window, "clear")
+        self.tmux("clear-history", "-t", f"readme:{window}")
+
+    def run(self, window: str, command: str, seconds: float) -> list[str]:
+        """`command` typed at the window's prompt, and the lines it printed once the prompt
+        shows again; fails showing the screen."""
+        deadline = time.monotonic() + seconds
+        prompt = self.screen(window).rstrip().rpartition("\n")[2]
+        while not prompt.endswith(("$", "#")):  # typed before the shell waits, it is echoed twice
+            if time.monotonic() > deadline:
+                raise AssertionError(f"no prompt in {window}:\n{self.screen(window)}")
+            time.sleep(0.5)
+            prompt = self.screen(window).rstrip().rpartition("\n")[2]
+        self.type(window, command)
+        lines: list[str] = []
+        while time.monotonic() < deadline:
+            lines = [line.rstrip() for line in self.screen(window).splitlines()]
+            typed = [i for i, line in enumerate(lines) if line.endswith(f"{prompt} {command}")]
+            after = range(typed[-1] + 1, len(lines)) if typed else range(0)
+            end = next((i for i in after if lines[i].startswith(prompt)), None)
+            if end is not None:
+                return lines[typed[-1] + 1 : end]
+            time.sleep(0.5)
+        shown = "\n".join(lines)
+        raise AssertionError(f"{command!r} still runs in {window} after {seconds:g} s:\n{shown}")
 
     def wait_for(self, window: str, pattern: str, seconds: float) -> str:
         """The screen once `pattern` (a regular expression) is on it; fails showing the screen."""
@@ -150,8 +189,28 @@ def teach_place(term: Terminal, place: str, pose: dict[str, float]) -> None:
     term.wait_for("app", rf"{place}\s+shoulder {pose['shoulder']:g}°", 10)  # the samples list
 
 
-@pytest.mark.timeout(420)
-def test_the_readmes_five_steps_in_a_real_terminal(tmp_path, virtual_mic):
+def moves(term: Terminal) -> list[str]:
+    """The moves the emulator has said it received (`servant emulate-servo`: one line a move,
+    however many steps the link sent it in), oldest first."""
+    return [line for line in term.screen("arm").splitlines() if "received a move: " in line]
+
+
+def pose_move(pose: dict[str, float]) -> str:
+    """The emulator's words for a move to `pose`, as a regular expression."""
+    return ".*".join(rf"{joint} {round(angle)}° " for joint, angle in pose.items())
+
+
+def wait_for_move(term: Terminal, pose: dict[str, float], after: int, seconds: float) -> None:
+    """Until the emulator says it received a move to `pose` after its first `after` moves."""
+    deadline = time.monotonic() + seconds
+    while not any(re.search(pose_move(pose), move) for move in moves(term)[after:]):
+        if time.monotonic() > deadline:
+            raise AssertionError(f"no move to {pose} after {seconds:g} s: {moves(term)[after:]}")
+        time.sleep(0.5)
+
+
+@pytest.mark.timeout(660)
+def test_the_readmes_five_steps_then_its_command_line_in_a_real_terminal(tmp_path, virtual_mic):
     env = {
         **os.environ,
         "SERVANT_DATA_DIR": str(tmp_path / "data"),
@@ -223,6 +282,68 @@ def test_the_readmes_five_steps_in_a_real_terminal(tmp_path, virtual_mic):
 
         term.keys("app", "q")
         term.wait_for_shell("app", 20)  # the app quit cleanly
+        player.kill()
+
+        # 6. `servant train LIBRARY`, the README's first command-line example, on the library
+        # teach mode wrote: it replaced the model taught in the app, silently (issue 39 item 1).
+        data = tmp_path / "data"
+        library, model = data / "library", data / "model.npz"
+        taught = model.read_bytes()
+        said = term.run("app", f"servant train {library}", 60)
+        assert len(said) == 1, said  # one line: what is wrong, what to do
+        assert said[0].startswith(f"servant: error: {model}: holds the model"), said
+        assert "-o FILE" in said[0] and "--force" in said[0], said
+        assert term.run("app", 'echo "exit status $?"', 10) == ["exit status 2"]
+        assert model.read_bytes() == taught and not model.with_name("model.1.npz").exists()
+        recognisers = load_model(model)  # loadable: the places teach mode taught
+        assert all(r.scenes_ == sorted(PLACES) for r in recognisers.values()), recognisers
+
+        # 7. Headless, armed, with that model: the street, a gym never taught, the café. Each
+        # state is to be said when it begins: the issue saw `CafeScene detected`, `arm armed,
+        # at …` and `unknown audio (audio-N)` at every 5 s window, and the café's pose sent to
+        # the controller again at each (items 3, 4). The street comes first: the arm stands at
+        # the café's pose the app left it in.
+        sounds["gym"] = scene_sound("gym", tmp_path / "gym.wav", seconds=90.0)
+        before = len(moves(term))
+        term.clear("app")
+        term.type("app", "servant run --headless --arm")
+        term.wait_for("app", r"arm armed, at", 60)
+        for place, scene, seed in [
+            ("street", "street", 98),
+            ("gym", "gym", 97),
+            ("cafe", "coffee", 96),
+        ]:
+            show(scene, camera, seed=seed)
+            player = play(sounds[place])
+            if place in poses:
+                term.wait_for("app", rf"{place.title()}Scene detected", 60)
+                wait_for_move(term, poses[place], before, 30)
+            else:  # said once the place has held 30 s
+                term.wait_for("app", r"a place Servant was not taught", 75)
+            time.sleep(11.0)  # two more 5 s windows there: each said it all again, and resent
+            player.kill()
+        term.keys("app", "C-c")
+        term.wait_for_shell("app", 20)
+
+        run = term.screen("app", start="-")
+        lines = run.splitlines()
+        assert NO_MODEL not in run and "Traceback" not in run, run  # the model was loaded
+        for place in poses:
+            decided = [line for line in lines if f"{place.title()}Scene detected" in line]
+            assert len(decided) == 1, run
+            moved = [line for line in lines if f"arm moved to {place}'s pose" in line]
+            assert len(moved) == 1, run
+        assert len([line for line in lines if "arm armed, at" in line]) == 1, run
+        unknown = [line for line in lines if re.search(r"\baudio-\d", line)]
+        assert len(unknown) == 1, run
+        assert "a place Servant was not taught" in unknown[0], unknown
+        assert "teach mode, key t" in unknown[0] and f"{library}/<name>/" in unknown[0], unknown
+        assert f"servant train {library} --force" in unknown[0], unknown
+        received = moves(term)[before:]
+        assert len(received) == 2, received  # the street's pose, then the café's: once each
+        assert re.search(pose_move(poses["street"]), received[0]), received
+        assert re.search(pose_move(poses["cafe"]), received[1]), received
+        assert model.read_bytes() == taught
     finally:
         if player is not None:
             player.kill()
