@@ -27,7 +27,7 @@ from servant_core.audio import (
     first_line,
 )
 from servant_core.errors import ServantError
-from servant_core.fusion.learned import FusionNet
+from servant_core.fusion.net import FusionNet
 from servant_core.numbers import is_finite_number, json_loads
 from servant_core.recognisers import UNKNOWN, Recogniser, methods_for
 from servant_core.senses import ROLE_SENSE

@@ -6,7 +6,12 @@ import pytest
 from servant_core.errors import ServantError
 from servant_core.events import Decision
 from servant_core.fusion import POLICIES, FusionConfig, LearnedFusion, ParallelFusion
-from servant_core.fusion.learned import (
+from servant_core.fusion.learning import (
+    contiguous_folds,
+    order_folds,
+    train_fusion_net,
+)
+from servant_core.fusion.net import (
     FLAGS,
     LEGACY_FLAGS,
     FusionNet,
@@ -14,11 +19,6 @@ from servant_core.fusion.learned import (
     precision_threshold,
     teaching_shortfall,
     training_rows,
-)
-from servant_core.fusion.learning import (
-    contiguous_folds,
-    order_folds,
-    train_fusion_net,
 )
 from servant_core.recognisers import UNKNOWN
 

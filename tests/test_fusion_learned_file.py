@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from servant_core.errors import ServantError
-from servant_core.fusion.learned import FLAGS, FusionNet
+from servant_core.fusion.net import FLAGS, FusionNet
 from servant_core.modelfile import load_model, load_model_and_fusion, save_model
 from servant_core.recognisers.paper import PaperAcousticRecogniser, PaperVisualRecogniser
 from servant_core.storage import atomic_save_npz

@@ -27,7 +27,6 @@ from servant_core.capture.sample_files import cut_sample_windows, read_samples, 
 from servant_core.capture.sensors import RATES
 from servant_core.errors import ServantError
 from servant_core.features.rows import checked_rows, usable_rows
-from servant_core.fusion.learned import FusionNet, SenseOpinions
 from servant_core.fusion.learning import (
     DEFAULT_FOLDS,
     fresh_copy,
@@ -37,6 +36,7 @@ from servant_core.fusion.learning import (
     train_fusion_net,
     window_opinions,
 )
+from servant_core.fusion.net import FusionNet, SenseOpinions
 from servant_core.library import (
     SampleFile,
     SceneLibrary,

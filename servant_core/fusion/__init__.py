@@ -14,7 +14,8 @@ from typing import ClassVar, Protocol
 
 from servant_core.choices import DEFAULT_POLICY
 from servant_core.events import Decision, FusionState
-from servant_core.fusion.learned import FusionNet, LearnedFusion
+from servant_core.fusion.learned import LearnedFusion
+from servant_core.fusion.net import FusionNet
 from servant_core.fusion.parallel import ParallelFusion
 from servant_core.fusion.sequential import FusionConfig, SequentialFusion, scene_line
 

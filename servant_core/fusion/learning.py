@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from servant_core.errors import ServantError
-from servant_core.fusion.learned import FusionNet, SenseOpinions
+from servant_core.fusion.net import FusionNet, SenseOpinions
 from servant_core.library import Picture, WindowFeatures, visits_of
 from servant_core.recognisers.base import (
     Recogniser,
