@@ -91,8 +91,8 @@ ROLES = {sense: spec.role for sense, spec in SENSES.items()}  # a sense's name -
 
 NO_MODEL = (
     "no model yet: nothing can be recognised until two scenes are taught (teach mode, key t: "
-    "six 5 s recordings and a few pictures of each, then Retrain) or a model is given "
-    "(`servant train LIBRARY -o model.npz`, then --model)"
+    "six 5 s recordings and a few pictures of each, then Retrain) or trained from a library "
+    "of recordings and pictures (`servant train LIBRARY`, then start servant again)"
 )
 
 
