@@ -74,6 +74,10 @@ class TaughtPlacesOnly:
     def open_proba(self, X: np.ndarray) -> np.ndarray:
         return np.asarray(self.predict_proba(X), dtype=float)  # type: ignore[attr-defined]
 
+    def confidence(self, X: np.ndarray) -> np.ndarray:
+        """The likeliest place's share in percent (a method with its own unit overrides it)."""
+        return 100.0 * np.max(self.open_proba(X), axis=1)
+
     def answers(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(`predict`, `confidence`, `predict_proba`) of rows `X`."""
         names = np.asarray(self.predict(X)).astype(str)  # type: ignore[attr-defined]
