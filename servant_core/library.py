@@ -2,12 +2,15 @@
 
 Each audio file is one *recording* and keeps its identity (the evaluation protocols split by
 recording); each image file is one *picture*. Files are found at any depth below `<scene>/`.
+Teach mode's recordings, pictures and sample logs are written here (`SceneLibrary.add_*`), each
+atomically; a write adds a file on disk, not to a listing already scanned.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
+from datetime import datetime
 from pathlib import Path
 
 import cv2
@@ -19,11 +22,19 @@ from servant_core.audio import (
     DEFAULT_WINDOW_SECONDS,
     cut_windows,
     read_audio,
+    write_wav,
 )
 from servant_core.errors import ServantError
 from servant_core.features.rows import usable_rows
+from servant_core.place_names import place_name
 from servant_core.senses import PICTURE_SUFFIXES, SAMPLE_SENSES, UNKNOWN
-from servant_core.storage import open_regular_file, os_reason, walk_files
+from servant_core.storage import (
+    atomic_write_bytes,
+    atomic_write_text,
+    open_regular_file,
+    os_reason,
+    walk_files,
+)
 
 # A webcam frame is under 1 Mpx and a phone photo under 50 Mpx; a header claiming more is
 # damaged or hostile (a 1 MB PNG can claim gigabytes). Checked before decoding.
@@ -129,6 +140,86 @@ class SceneLibrary:
             [p for p in self.pictures if p.scene in keep],
             {sense: [f for f in files if f.scene in keep] for sense, files in self.samples.items()},
         )
+
+    @classmethod
+    def at(cls, root: str | Path) -> SceneLibrary:
+        """The library at `root` to write into, unlisted: its folder need not exist yet."""
+        return cls(Path(root), [])
+
+    def add_recording(
+        self, scene: str, window: np.ndarray, rate: int, stem: str | None = None
+    ) -> Path:
+        """Write mono float sound at `rate` as `<scene>/<stem>.wav` (16-bit); the file."""
+        return self._add(
+            scene, stem, ".wav", "recording", lambda path: write_wav(path, window, rate)
+        )
+
+    def add_picture(self, scene: str, frame: np.ndarray, stem: str | None = None) -> Path:
+        """Write a BGR uint8 picture as `<scene>/<stem>.png`; the file."""
+        ok, png = cv2.imencode(".png", frame)
+        if not ok:
+            raise ServantError("camera: the picture could not be encoded; try again")
+        return self._add(
+            scene, stem, ".png", "picture", lambda path: atomic_write_bytes(path, png.tobytes())
+        )
+
+    def add_samples(
+        self,
+        scene: str,
+        sense: str,
+        rows: np.ndarray,
+        rate: int,
+        channels: Sequence[str],
+        stem: str | None = None,
+    ) -> Path:
+        """Write a sample sense's (n, channels) readings at `rate` as its log,
+        `<scene>/<stem>.<stream>.csv` (`channels` name its columns); the file."""
+        text = sample_log_text(rows, rate, channels)
+        suffix = SAMPLE_SENSES[sense].suffixes[0]
+        return self._add(
+            scene, stem, suffix, f"{sense} log", lambda path: atomic_write_text(path, text)
+        )
+
+    def _add(
+        self, scene: str, stem: str | None, suffix: str, what: str, write: Callable[[Path], Path]
+    ) -> Path:
+        """`write(path)` for a new file of the scene's folder, its name `<stem><suffix>` (a
+        teach stamp when no stem is given). Every write is atomic (a temporary file, then
+        `os.replace`): one that fails leaves no part of the file and keeps what was there, and
+        is one ServantError. `scene` is a place's name by `place_name`: a folder already there
+        matching it is that place, in its spelling."""
+        name = f"{stem or teach_stem()}{suffix}"
+        if name != Path(name).name or name.startswith("."):
+            raise ValueError(f"{name!r}: not a plain, visible file name")
+        folder = self.root / place_name(scene, self.root)
+        try:
+            return write(folder / name)
+        except OSError as exc:
+            raise ServantError(
+                f"{folder / name}: the {what} cannot be written ({os_reason(exc)}); "
+                "make room or fix the folder, then try again"
+            ) from None
+
+
+def teach_stem(now: datetime | None = None) -> str:
+    """The name teach mode gives the files of one recording or picture: its time, to the
+    microsecond (`teach-20250314-093015-123456`)."""
+    return (now or datetime.now()).strftime("teach-%Y%m%d-%H%M%S-%f")
+
+
+def sample_log_text(
+    samples: np.ndarray, rate: int, channels: Sequence[str], start: float = 0.0
+) -> str:
+    """(n, channels) readings at `rate` as a sample log's CSV: a header `time,<channels>`,
+    then a row a reading (`capture.sample_files` reads it back)."""
+    samples = np.asarray(samples)
+    if samples.ndim != 2 or samples.shape[1] != len(channels):
+        raise ValueError(f"expected (n, {len(channels)}) samples")
+    lines = [",".join(("time", *channels))]
+    for i, row in enumerate(samples):
+        values = ",".join(f"{float(x):.4f}" for x in row)
+        lines.append(f"{start + i / rate:.4f},{values}")
+    return "\n".join(lines) + "\n"
 
 
 @dataclass

@@ -37,6 +37,7 @@ from servant_core.capture.replay import Clip, PacedAudio
 from servant_core.capture.sensors import CHANNELS, RATES, rows_in_range
 from servant_core.capture.source import ManualClock
 from servant_core.errors import ServantError
+from servant_core.library import sample_log_text
 from servant_core.numbers import MAX_STAMP
 from servant_core.senses import SAMPLE_SENSES
 from servant_core.storage import atomic_write_text, open_regular_file, os_reason
@@ -240,15 +241,7 @@ def write_sample_csv(
     path: str | Path, samples: np.ndarray, rate: int, kind: str, start: float = 0.0
 ) -> Path:
     """Write (n, channels) samples at `rate` as a CSV this module reads back, atomically."""
-    samples = np.asarray(samples)
-    channels = CHANNELS[kind]
-    if samples.ndim != 2 or samples.shape[1] != len(channels):
-        raise ValueError(f"expected (n, {len(channels)}) samples")
-    lines = [",".join(("time", *channels))]
-    for i, row in enumerate(samples):
-        values = ",".join(f"{float(x):.4f}" for x in row)
-        lines.append(f"{start + i / rate:.4f},{values}")
-    return atomic_write_text(path, "\n".join(lines) + "\n")
+    return atomic_write_text(path, sample_log_text(samples, rate, CHANNELS[kind], start))
 
 
 class PacedSamples(PacedAudio):
