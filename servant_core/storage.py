@@ -18,6 +18,11 @@ import platformdirs
 
 from servant_core.errors import ServantError
 
+try:
+    import fcntl
+except ImportError:  # Windows: no locks on files this way; temporaries go by their age
+    fcntl = None  # type: ignore[assignment]
+
 if TYPE_CHECKING:  # numpy loads with the one function that needs it: settings stay light
     import numpy as np
 
@@ -69,20 +74,55 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
         old_mode: int | None = stat.S_IMODE(os.stat(path).st_mode)
     except OSError:
         old_mode = None
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = _locked_temporary(path)
     try:
         if old_mode is not None:
             os.fchmod(fd, old_mode)
-        with os.fdopen(fd, "wb") as handle:
+        with os.fdopen(fd, "wb") as handle:  # closed, and so unlocked, only once renamed
             handle.write(data)
             handle.flush()
             os.fsync(handle.fileno())
-        os.replace(tmp, path)
+            os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
     _sync_directory(path.parent)
     return path
+
+
+def _locked_temporary(path: Path) -> tuple[int, str]:
+    """A new temporary beside `path` (`.NAME.XXXXXXXX.tmp`, open for writing), locked while
+    this process writes it. The kernel drops the lock when the process ends, however it ends:
+    a temporary nobody holds is one a killed writer left (`remove_stale_temporaries`)."""
+    while True:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        _lock(fd, wait=True)
+        if _names(tmp, fd):
+            return fd, tmp
+        os.close(fd)  # taken for a killed writer's between its making and its lock, and removed
+
+
+def _lock(fd: int, wait: bool) -> bool | None:
+    """Lock the file open at `fd` for this process (`flock`, exclusive): True when locked,
+    False when another holds it (without `wait`), None where files cannot be locked."""
+    if fcntl is None:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+    except BlockingIOError:
+        return False
+    except OSError:  # e.g. a file system without locks
+        return None
+    return True
+
+
+def _names(name: str, fd: int) -> bool:
+    """Whether `name` is still the file open at `fd`."""
+    try:
+        named, opened = os.stat(name, follow_symlinks=False), os.fstat(fd)
+    except OSError:
+        return False
+    return (named.st_dev, named.st_ino) == (opened.st_dev, opened.st_ino)
 
 
 def file_stamp(path: str | os.PathLike[str]) -> tuple[int, int, int] | None:
@@ -117,14 +157,17 @@ def numbered_backup(path: str | os.PathLike[str]) -> Path | None:
     raise ServantError(f"{path}: 9,999 backups of it already; move some away")
 
 
-# A write takes seconds at most; a temporary this old was left by a process killed mid-write.
+# A write takes seconds at most: a temporary this old was left by a process killed mid-write,
+# the one sign of it where files cannot be locked (see `_removed_if_abandoned`).
 STALE_TEMPORARY_SECONDS = 3600.0
 
 
 def remove_stale_temporaries(path: Path, now: float | None = None) -> list[Path]:
     """Remove the temporaries of earlier writes of `path` (`.NAME.XXXXXXXX.tmp`, as
-    `atomic_write_bytes` names them) that a killed process left, an hour old or more; a
-    temporary of a write going on now is younger and kept. Returns those removed."""
+    `atomic_write_bytes` names them) that a killed process left: those no writer holds locked
+    (a `servant train` or retrain killed mid-save left one until a save an hour later), and
+    any an hour old or more. A temporary of a write going on now is locked and kept. Returns
+    those removed."""
     now = time.time() if now is None else now
     prefix = f".{path.name}."
     removed: list[Path] = []
@@ -139,10 +182,30 @@ def remove_stale_temporaries(path: Path, now: float | None = None) -> list[Path]
         if len(name) != len(prefix) + 8 + len(".tmp"):  # mkstemp's 8 characters, no other file
             continue
         with contextlib.suppress(OSError):
-            if now - entry.stat(follow_symlinks=False).st_mtime >= STALE_TEMPORARY_SECONDS:
+            if _removed_if_abandoned(entry.path):
+                removed.append(Path(entry.path))
+            elif now - entry.stat(follow_symlinks=False).st_mtime >= STALE_TEMPORARY_SECONDS:
                 os.unlink(entry.path)
                 removed.append(Path(entry.path))
     return removed
+
+
+def _removed_if_abandoned(name: str) -> bool:
+    """Remove the temporary `name` if no process holds it locked (its writer was killed);
+    whether it was removed. Removed while locked here, so that no writer takes it meanwhile."""
+    try:
+        fd = os.open(name, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOFOLLOW", 0))
+    except OSError:
+        return False
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode) or not _lock(fd, wait=False):
+            return False
+        if not _names(name, fd):
+            return False
+        os.unlink(name)
+        return True
+    finally:
+        os.close(fd)
 
 
 def _sync_directory(folder: Path) -> None:

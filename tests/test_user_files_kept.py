@@ -194,16 +194,23 @@ def test_teach_keeps_a_records_link_and_a_read_only_records_file(tmp_path: Path)
 
 def test_a_save_removes_the_temporaries_a_killed_save_left(tmp_path: Path) -> None:
     """Issue 24 item 8: a kill during a save left `.model.npz.XXXXXXXX.tmp`, and nothing ever
-    removed it. The next save of that file removes those an hour old; a write going on now
-    (a younger one) and files of other names are kept."""
+    removed it. The next save of that file removes those no writer holds (issue 41: a killed
+    writer's, at once, not an hour later) and those an hour old; a write going on now (its
+    writer holds it locked) and files of other names are kept."""
+    import fcntl
+
     model = tmp_path / "model.npz"
-    stale, fresh = tmp_path / ".model.npz.ab12cd34.tmp", tmp_path / ".model.npz.ef56gh78.tmp"
+    stale, killed = tmp_path / ".model.npz.ab12cd34.tmp", tmp_path / ".model.npz.ij90kl12.tmp"
+    fresh = tmp_path / ".model.npz.ef56gh78.tmp"
     other = tmp_path / ".model.npz.my-own-notes.tmp"
-    for path in (stale, fresh, other):
+    for path in (stale, killed, fresh, other):
         path.write_bytes(PRECIOUS)
     hours_ago = time.time() - 7200
     os.utime(stale, (hours_ago, hours_ago))
     os.utime(other, (hours_ago, hours_ago))
-    atomic_write_bytes(model, b"model")
-    assert not stale.exists() and fresh.exists() and other.read_bytes() == PRECIOUS
+    with fresh.open("rb") as writing:
+        fcntl.flock(writing, fcntl.LOCK_EX)  # as a writer does while it writes
+        atomic_write_bytes(model, b"model")
+    assert not stale.exists() and not killed.exists()
+    assert fresh.read_bytes() == PRECIOUS and other.read_bytes() == PRECIOUS
     assert model.read_bytes() == b"model"
