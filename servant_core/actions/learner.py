@@ -119,42 +119,13 @@ class ActionLearner:
         )
         self.taught_scenes_ = sorted({r.scene for r in records})
         self.joints_ = list(dict.fromkeys(name for r in records for name in r.pose))
-        home = self.home or {}
-        y = np.empty((len(records), len(self.joints_)))
-        for i, record in enumerate(records):
-            for j, joint in enumerate(self.joints_):
-                if joint in record.pose:
-                    y[i, j] = record.pose[joint]
-                elif joint in home:
-                    y[i, j] = home[joint]
-                else:
-                    raise ServantError(
-                        f"teach record {i + 1} ({record.scene}) has no angle for joint {joint!r}; "
-                        "teach it again with a full pose"
-                    )
+        y = _angles(records, self.joints_, self.home or {})
         x = np.array([self.features(r.scores) for r in records])
-        self.y_mean_ = y.mean(axis=0)
-        spread = y.std(axis=0)
-        self.y_scale_ = np.where(spread > 0, spread, 1.0)
-        target = (y - self.y_mean_) / self.y_scale_
-        if target.shape[1] == 1:
-            target = target.ravel()  # scikit-learn wants a 1-d target for a single output
-        net = MLPRegressor(
-            hidden_layer_sizes=self.hidden_layer_sizes,
-            activation=self.activation,
-            learning_rate_init=self.learning_rate_init,
-            tol=0.0,
-            n_iter_no_change=self.max_iter
-            + 1,  # train for exactly max_iter: the error is the report
-            warm_start=True,
-            random_state=self.random_state,
-        )
+        self.y_mean_, self.y_scale_, target = _standardised(y)
+        net = self._network()
         self.history_: list[tuple[int, float]] = []
         done = 0
-        checkpoints = [1, *range(self.report_every, self.max_iter + 1, self.report_every)]
-        if checkpoints[-1] != self.max_iter:
-            checkpoints.append(self.max_iter)
-        for checkpoint in checkpoints:
+        for checkpoint in _checkpoints(self.report_every, self.max_iter):
             net.set_params(max_iter=checkpoint - done)
             # One BLAS thread: these matrices are tiny, and threads fighting over a busy CPU made
             # a 300-scene fit 20 times slower (bench/teach_records.py).
@@ -170,6 +141,19 @@ class ActionLearner:
                 report(done, error)
         self.n_records_ = len(records)
         return self
+
+    def _network(self) -> MLPRegressor:
+        """The network `fit` trains a chunk at a time (`warm_start`), never stopping on its own:
+        it runs for exactly `max_iter` iterations, whose error is the report."""
+        return MLPRegressor(
+            hidden_layer_sizes=self.hidden_layer_sizes,
+            activation=self.activation,
+            learning_rate_init=self.learning_rate_init,
+            tol=0.0,
+            n_iter_no_change=self.max_iter + 1,
+            warm_start=True,
+            random_state=self.random_state,
+        )
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "scenes_"):
@@ -316,3 +300,44 @@ class ActionLearner:
                 f"{path}: damaged action learner ({exc}); retrain with `servant teach`"
             ) from exc
         return learner
+
+
+def _angles(
+    records: Sequence[TeachRecord], joints: Sequence[str], home: Mapping[str, float]
+) -> np.ndarray:
+    """The taught angles, a row per record and a column per joint: a joint a record does not set
+    takes its `home` angle; without one it is a ServantError naming the record."""
+    y = np.empty((len(records), len(joints)))
+    for i, record in enumerate(records):
+        for j, joint in enumerate(joints):
+            if joint in record.pose:
+                y[i, j] = record.pose[joint]
+            elif joint in home:
+                y[i, j] = home[joint]
+            else:
+                raise ServantError(
+                    f"teach record {i + 1} ({record.scene}) has no angle for joint {joint!r}; "
+                    "teach it again with a full pose"
+                )
+    return y
+
+
+def _standardised(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(mean, scale, target): the angles standardised per joint (a joint that never moves keeps
+    a scale of 1), 1-d for a single joint, as scikit-learn wants a single output."""
+    mean = y.mean(axis=0)
+    spread = y.std(axis=0)
+    scale = np.where(spread > 0, spread, 1.0)
+    target = (y - mean) / scale
+    if target.shape[1] == 1:
+        target = target.ravel()
+    return mean, scale, target
+
+
+def _checkpoints(report_every: int, max_iter: int) -> list[int]:
+    """The iteration counts at which `fit` reports: after the first, every `report_every`, and
+    at `max_iter`."""
+    checkpoints = [1, *range(report_every, max_iter + 1, report_every)]
+    if checkpoints[-1] != max_iter:
+        checkpoints.append(max_iter)
+    return checkpoints

@@ -38,9 +38,8 @@ in the demo goes to a temporary folder, deleted when it ends."""
 
 
 def register(subparsers: Any) -> None:
-    from servant_core.choices import DEFAULT_POLICY, POLICY_NAMES
-    from servant_core.settings import PROTOCOLS
-
+    """Add `run` (its devices, the arm, the fusion policy) and `demo` (its seed and policy), both
+    with `--headless`, `--duration` and `--json`."""
     run = subparsers.add_parser(
         "run",
         description=RUN_DESCRIPTION,
@@ -50,6 +49,17 @@ def register(subparsers: Any) -> None:
         help="model file from `servant train`; what you teach is saved back to it (default: the "
         "model teach mode saved, if any)",
     )
+    _device_options(run)
+    _arm_options(run)
+    _run_policy_option(run)
+    run.add_argument("--list-devices", action="store_true", help="list input devices and exit")
+    _common(run)
+    run.set_defaults(handler=run_live)
+    _register_demo(subparsers.add_parser("demo", description=DEMO_DESCRIPTION))
+
+
+def _device_options(run: argparse.ArgumentParser) -> None:
+    """`run`'s senses: the microphone, the camera and a source per sample sense."""
     run.add_argument(
         "--mic",
         help="input device index or name (default: Settings, else the "
@@ -71,6 +81,12 @@ def register(subparsers: Any) -> None:
             f"sense), a log (*{sense.suffixes[0]}, as phone sensor-logger apps export) or a "
             "folder of them (docs/sensors.md)",
         )
+
+
+def _arm_options(run: argparse.ArgumentParser) -> None:
+    """`run`'s arm: its port, its controller, and whether it moves from the start."""
+    from servant_core.settings import PROTOCOLS
+
     run.add_argument(
         "--port", help="the arm's serial port (default: Settings; see `servant servo list-ports`)"
     )
@@ -83,6 +99,12 @@ def register(subparsers: Any) -> None:
         help="arm the arm at once, so that detected scenes move it (in the app: key a); "
         "without it the arm never moves",
     )
+
+
+def _run_policy_option(run: argparse.ArgumentParser) -> None:
+    """`run --policy`: how the senses' opinions become a decision."""
+    from servant_core.choices import DEFAULT_POLICY, POLICY_NAMES
+
     run.add_argument(
         "--policy",
         choices=sorted(POLICY_NAMES),
@@ -90,14 +112,12 @@ def register(subparsers: Any) -> None:
         help="fusion: `sequential` is the paper's 30 s / 20 s rule; `learned` is a small neural "
         "net over every sense (trained with the model; without one it acts as `parallel`)",
     )
-    run.add_argument("--list-devices", action="store_true", help="list input devices and exit")
-    _common(run)
-    run.set_defaults(handler=run_live)
 
-    demo = subparsers.add_parser(
-        "demo",
-        description=DEMO_DESCRIPTION,
-    )
+
+def _register_demo(demo: argparse.ArgumentParser) -> None:
+    """`demo`'s options: the seed of its scenes, the paper's methods, the policy, `--fast`."""
+    from servant_core.choices import POLICY_NAMES
+
     demo.add_argument(
         "--seed", type=bounded_int(0, 2**31 - 1), default=0, help="seed of the synthesised scenes"
     )

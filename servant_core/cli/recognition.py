@@ -33,7 +33,7 @@ from servant_core.evaluate import (
 )
 from servant_core.event_text import confidence_text, place
 from servant_core.features.rows import checked_rows, usable_rows
-from servant_core.fusion import POLICIES, FusionConfig, LearnedFusion
+from servant_core.fusion import POLICIES, FusionConfig, FusionNet, LearnedFusion
 from servant_core.fusion.elsewhere import beside_open_sound, shown
 from servant_core.library import (
     SceneLibrary,
@@ -98,50 +98,108 @@ def _audio_params(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    output = check_model_output(args.output or default_model_file())  # before the work
+    """`servant train`: fit a recogniser per sense the library has two places or more for (and
+    with `--learned-fusion` the net over them), write the model, and say what was trained."""
+    output = _train_output(args)
+    stamp = file_stamp(output)
+    library = SceneLibrary.scan(args.root)
+    on_error = _on_bad_file(args)
+    recognisers, trained = _train_recognisers(args, library, on_error)
+    if not recognisers:
+        raise ServantError(
+            f"{args.root}: training needs at least two scene folders with recordings, pictures "
+            "or sensor logs"
+        )
+    summary: dict[str, Any] = {"root": str(args.root), **trained}
+    fusion = None
+    if args.learned_fusion:
+        fusion, summary["fusion"] = _train_fusion(args, library, recognisers, on_error)
+    # the model `servant` loads is kept when replaced; a file named with -o is the user's say
+    backup = replace_model(output, recognisers, fusion, stamp, backup=args.output is None)
+    summary["model"] = str(output)
+    summary["backup"] = None if backup is None else str(backup)
+    emit(args, summary, "\n".join(_trained_lines(summary, output, backup)))
+    return 0
+
+
+def _train_output(args: argparse.Namespace) -> Path:
+    """The file `train` writes, checked before any work: the model `servant` loads is replaced
+    only with `--force`."""
+    output = check_model_output(args.output or default_model_file())
     if args.output is None and output.exists() and not args.force:
         raise ServantError(
             f"{output}: holds the model `servant` loads (what teach mode and earlier trainings "
             "taught); not replaced. Give -o FILE to train into another file, or --force to "
             "replace it (the old one is kept beside it as a numbered backup)"
         )
-    stamp = file_stamp(output)
-    library = SceneLibrary.scan(args.root)
-    on_error = _on_bad_file(args)
+    return output
+
+
+def _train_recognisers(
+    args: argparse.Namespace, library: SceneLibrary, on_error: Callable[[ServantError], None]
+) -> tuple[dict[str, Recogniser], dict[str, Any]]:
+    """Each recogniser the library has two places or more for, by role, and the summary's
+    entries: `warnings` (the labels' warnings of sound and pictures), then one per role."""
     recognisers: dict[str, Recogniser] = {}
-    summary: dict[str, Any] = {"root": str(args.root), "warnings": []}
+    summary: dict[str, Any] = {"warnings": []}
     if len({r.scene for r in library.recordings}) >= 2:
-        audio = kept_out(
-            make_audio_recogniser(args.audio_method, **_audio_params(args)), library.recordings
-        )
-        wf = featurize_recordings(
-            library.recordings,
-            audio.featurize,
-            audio.rate,
-            args.window,
-            on_error,
-            Progress("listening to recordings"),
-        )
-        fit_visits(audio, wf.features, wf.scenes, visits_of(wf))
-        recognisers["acoustic"] = audio
-        summary["acoustic"] = {
-            "method": args.audio_method,
-            "scenes": audio.scenes_,
-            "n_windows": len(wf.scenes),
-        }
-        summary["warnings"] += getattr(getattr(audio, "labels_", None), "warnings", list)()
+        recognisers["acoustic"], summary["acoustic"] = _train_audio(args, library, on_error)
+        summary["warnings"] += _label_warnings(recognisers["acoustic"])
     if len({p.scene for p in library.pictures}) >= 2:
-        visual = make_recogniser("image", args.image_method)
-        images, kept = read_pictures(library.pictures, on_error, Progress("reading pictures"))
-        X_pictures = visual.featurize(images)
-        visual.fit(X_pictures, [p.scene for p in kept])
-        recognisers["visual"] = visual
-        summary["visual"] = {
-            "method": args.image_method,
-            "scenes": visual.scenes_,
-            "n_pictures": len(kept),
-        }
-        summary["warnings"] += getattr(getattr(visual, "labels_", None), "warnings", list)()
+        recognisers["visual"], summary["visual"] = _train_visual(args, library, on_error)
+        summary["warnings"] += _label_warnings(recognisers["visual"])
+    for sense, model in _train_samples(args, library, on_error).items():
+        recognisers[sense] = model
+        summary[sense] = {"method": model.method, "scenes": model.scenes_}
+    return recognisers, summary
+
+
+def _label_warnings(model: Recogniser) -> list[str]:
+    """What a recogniser's labels warned of while it was fitted (none if it keeps no labels)."""
+    warnings: list[str] = getattr(getattr(model, "labels_", None), "warnings", list)()
+    return warnings
+
+
+def _train_audio(
+    args: argparse.Namespace, library: SceneLibrary, on_error: Callable[[ServantError], None]
+) -> tuple[Recogniser, dict[str, Any]]:
+    """The sound recogniser fitted on every recording's windows, and its summary entry."""
+    audio = kept_out(
+        make_audio_recogniser(args.audio_method, **_audio_params(args)), library.recordings
+    )
+    wf = featurize_recordings(
+        library.recordings,
+        audio.featurize,
+        audio.rate,
+        args.window,
+        on_error,
+        Progress("listening to recordings"),
+    )
+    fit_visits(audio, wf.features, wf.scenes, visits_of(wf))
+    return audio, {
+        "method": args.audio_method,
+        "scenes": audio.scenes_,
+        "n_windows": len(wf.scenes),
+    }
+
+
+def _train_visual(
+    args: argparse.Namespace, library: SceneLibrary, on_error: Callable[[ServantError], None]
+) -> tuple[Recogniser, dict[str, Any]]:
+    """The picture recogniser fitted on every picture that reads, and its summary entry."""
+    visual = make_recogniser("image", args.image_method)
+    images, kept = read_pictures(library.pictures, on_error, Progress("reading pictures"))
+    X_pictures = visual.featurize(images)
+    visual.fit(X_pictures, [p.scene for p in kept])
+    return visual, {"method": args.image_method, "scenes": visual.scenes_, "n_pictures": len(kept)}
+
+
+def _train_samples(
+    args: argparse.Namespace, library: SceneLibrary, on_error: Callable[[ServantError], None]
+) -> dict[str, Recogniser]:
+    """A recogniser per sensor sense whose logs cover two places or more. With `--skip-bad`, a
+    sense that cannot be trained is left out with a warning; without, its error stops training."""
+    models: dict[str, Recogniser] = {}
     for sense, files in library.samples.items():
         if len({f.scene for f in files}) < 2:
             continue
@@ -162,26 +220,31 @@ def cmd_train(args: argparse.Namespace) -> int:
             on_error(ServantError(f"{sense}: not trained: {error}"))
             model = None
         if model is not None:
-            recognisers[sense] = model
-            summary[sense] = {"method": model.method, "scenes": model.scenes_}
-    if not recognisers:
-        raise ServantError(
-            f"{args.root}: training needs at least two scene folders with recordings, pictures "
-            "or sensor logs"
-        )
-    fusion = None
-    if args.learned_fusion:
-        by_sense = {ROLE_SENSE[role]: model for role, model in recognisers.items()}
-        fusion, reason = library_fusion_net(library, by_sense, args.window, on_error)
-        summary["fusion"] = (
-            {"senses": fusion.senses_, "scenes": fusion.scenes_, "threshold": fusion.threshold_}
-            if fusion is not None
-            else {"fallback": reason}
-        )
-    # the model `servant` loads is kept when replaced; a file named with -o is the user's say
-    backup = replace_model(output, recognisers, fusion, stamp, backup=args.output is None)
-    summary["model"] = str(output)
-    summary["backup"] = None if backup is None else str(backup)
+            models[sense] = model
+    return models
+
+
+def _train_fusion(
+    args: argparse.Namespace,
+    library: SceneLibrary,
+    recognisers: dict[str, Recogniser],
+    on_error: Callable[[ServantError], None],
+) -> tuple[FusionNet | None, dict[str, Any]]:
+    """`--learned-fusion`: the net over the trained senses (None when too little was taught),
+    and its summary entry (its senses, places and threshold, or why the parallel policy decides)."""
+    by_sense = {ROLE_SENSE[role]: model for role, model in recognisers.items()}
+    fusion, reason = library_fusion_net(library, by_sense, args.window, on_error)
+    entry = (
+        {"senses": fusion.senses_, "scenes": fusion.scenes_, "threshold": fusion.threshold_}
+        if fusion is not None
+        else {"fallback": reason}
+    )
+    return fusion, entry
+
+
+def _trained_lines(summary: dict[str, Any], output: Path, backup: Path | None) -> list[str]:
+    """`train`'s plain text: where the model went, a line per trained sense, the learned
+    fusion's line when asked for, then the warnings."""
     lines = [f"model written to {output}"]
     if backup is not None:
         lines[0] += f"; the model it replaced is kept as {backup}"
@@ -202,8 +265,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             else f"learned fusion: none, the parallel policy decides ({f['fallback']})"
         )
     lines += [f"warning: {w}" for w in summary["warnings"]]
-    emit(args, summary, "\n".join(lines))
-    return 0
+    return lines
 
 
 def _names(scenes: list[str]) -> str:
@@ -212,6 +274,9 @@ def _names(scenes: list[str]) -> str:
 
 
 def cmd_predict(args: argparse.Namespace) -> int:
+    """`servant predict`: name the place of each window of `--audio` and of each `--image`
+    picture, and, given both, the decision the live engine would make from the recording's
+    first window and the pictures."""
     if args.audio is None and not args.image:
         raise ServantError("give --audio FILE and/or --image FILE...")
     model, fusion = load_model_and_fusion(args.model)
@@ -219,108 +284,142 @@ def cmd_predict(args: argparse.Namespace) -> int:
     lines: list[str] = []
     first_acoustic: Said | None = None
     if args.audio is not None:
-        audio = cast(AcousticRecogniser, _role(model, "acoustic", args.model))
-        rate, seconds = audio.rate, audio.window_seconds
-        windows = cut_windows(read_audio(args.audio, rate), rate, seconds)
-        if len(windows) == 0:
-            raise ServantError(
-                f"{args.audio}: shorter than one {seconds:g} s window; record longer"
-            )
-        silent = np.array([is_silent(w) for w in windows])
-        if np.all(silent):
-            raise ServantError(
-                f"{args.audio}: silence (below {SILENT_DBFS:.0f} dBFS) from start to end: "
-                "no place to name; was the microphone muted?"
-            )
-        if np.any(silent):
-            where = ", ".join(map(str, np.flatnonzero(silent)))
-            _warn(ServantError(f"{args.audio}: windows {where}: silence, no place named"))
-        X = audio.featurize(windows)
-        usable = usable_rows(X) & ~silent
-        if not np.any(usable):
-            raise ServantError(
-                f"{args.audio}: no window gives features that are finite numbers; "
-                "the file is damaged, record it again"
-            )
-        if not np.all(usable):
-            _warn(
-                ServantError(
-                    f"{args.audio}: windows {', '.join(map(str, np.flatnonzero(~usable)))}: "
-                    "features not finite numbers"
-                )
-            )
-        X = X[usable]
-        scenes, confidences = open_predict(audio, X), audio.confidence(X)
-        unit = audio.confidence_unit
-        judged = list(zip(np.flatnonzero(usable).tolist(), scenes, confidences, strict=True))
-        result["acoustic"] = [
-            {
-                "window": i,
-                "start_s": i * seconds,
-                "end_s": (i + 1) * seconds,
-                "scene": str(s),
-                "confidence": float(c),
-                "confidence_unit": unit,
-            }
-            for i, s, c in judged
-        ]
-        lines += [
-            f"Acoustic window {i} ({i * seconds:g}-{(i + 1) * seconds:g} s): "
-            + _judged(str(s), float(c), unit)
-            for i, s, c in judged
-        ]
-        first_acoustic = (
-            str(scenes[0]),
-            float(confidences[0]),
-            dict(zip(audio.scenes_, map(float, open_probabilities(audio, X)[0]), strict=True)),
-        )
+        result["acoustic"], heard, first_acoustic = _predict_audio(args, model)
+        lines += heard
     visual_predictions: list[Said] = []
     if args.image:
-        visual = _role(model, "visual", args.model)
-        X = checked_rows(visual.featurize([read_picture(p) for p in args.image]), "pictures")
-        visual_predictions = said_of(visual, X)
-        # as the live engine shows them: beside a sound that knows elsewhere, not as shares
-        closed_beside_open = beside_open_sound(model.get("acoustic"), visual)
-        figures = [
-            shown(
-                None if s == UNKNOWN else s, c, visual.confidence_unit, p or {}, closed_beside_open
-            )
-            for s, c, p in visual_predictions
-        ]
-        result["visual"] = [
-            {"picture": str(p), "scene": s, "confidence": c, "confidence_unit": unit}
-            for p, (s, _, _), (c, unit) in zip(args.image, visual_predictions, figures, strict=True)
-        ]
-        lines += [
-            f"Visual {p.name}: {_judged(s, c, unit)}"
-            for p, (s, _, _), (c, unit) in zip(args.image, visual_predictions, figures, strict=True)
-        ]
+        result["visual"], seen, visual_predictions = _predict_pictures(args, model)
+        lines += seen
     if first_acoustic is not None and visual_predictions:
-        config = _fusion_config(args)
-        # through the pipeline the live engine decides with: a learned net saved with the model
-        # by `train --learned-fusion` (without one, its fallback), or a rule policy
-        policy = (
-            LearnedFusion(config, fusion)
-            if args.policy == "learned"
-            else POLICIES[args.policy](config)
+        result["decision"], decided = _predict_decision(
+            args, model, fusion, first_acoustic, visual_predictions
         )
-        open_roles = [r for r in ("acoustic", "visual") if knows_elsewhere(model.get(r))]
-        decision = run_encounter(policy, config, first_acoustic, visual_predictions, open_roles)
-        shared = decision_unit(model.get("acoustic"), model.get("visual"))
-        said = (
-            "sure it is here and not elsewhere" if decision.not_elsewhere else "average confidence"
-        )
-        result["decision"] = {
-            "scene": decision.scene,
-            "line": decision.line,
-            "confidence": decision.confidence,
-            "confidence_unit": shared,
-            "leaned_on": list(decision.leaned_on),
-        }
-        average = confidence_text(decision.confidence, shared)
-        lines.append(f"{decision.line} ({said} {average})")
+        lines.append(decided)
     emit(args, result, "\n".join(lines))
     return 0
+
+
+def _predict_audio(
+    args: argparse.Namespace, model: dict[str, Recogniser]
+) -> tuple[list[dict[str, Any]], list[str], Said]:
+    """The place of each window of `--audio` that can name one: as JSON rows, as lines, and the
+    first such window's opinion (for the decision)."""
+    audio = cast(AcousticRecogniser, _role(model, "acoustic", args.model))
+    seconds = audio.window_seconds
+    X, usable = _usable_windows(args.audio, audio)
+    scenes, confidences = open_predict(audio, X), audio.confidence(X)
+    unit = audio.confidence_unit
+    judged = list(zip(np.flatnonzero(usable).tolist(), scenes, confidences, strict=True))
+    rows = [
+        {
+            "window": i,
+            "start_s": i * seconds,
+            "end_s": (i + 1) * seconds,
+            "scene": str(s),
+            "confidence": float(c),
+            "confidence_unit": unit,
+        }
+        for i, s, c in judged
+    ]
+    lines = [
+        f"Acoustic window {i} ({i * seconds:g}-{(i + 1) * seconds:g} s): "
+        + _judged(str(s), float(c), unit)
+        for i, s, c in judged
+    ]
+    first: Said = (
+        str(scenes[0]),
+        float(confidences[0]),
+        dict(zip(audio.scenes_, map(float, open_probabilities(audio, X)[0]), strict=True)),
+    )
+    return rows, lines, first
+
+
+def _usable_windows(path: Path, audio: AcousticRecogniser) -> tuple[np.ndarray, np.ndarray]:
+    """The features of the recording's windows that can name a place, and which windows those
+    are (a mask over all of them). Refuses a recording shorter than a window, all silence or with
+    no finite features; warns of the windows left out."""
+    rate, seconds = audio.rate, audio.window_seconds
+    windows = cut_windows(read_audio(path, rate), rate, seconds)
+    if len(windows) == 0:
+        raise ServantError(f"{path}: shorter than one {seconds:g} s window; record longer")
+    silent = np.array([is_silent(w) for w in windows])
+    if np.all(silent):
+        raise ServantError(
+            f"{path}: silence (below {SILENT_DBFS:.0f} dBFS) from start to end: "
+            "no place to name; was the microphone muted?"
+        )
+    if np.any(silent):
+        where = ", ".join(map(str, np.flatnonzero(silent)))
+        _warn(ServantError(f"{path}: windows {where}: silence, no place named"))
+    X = audio.featurize(windows)
+    usable = usable_rows(X) & ~silent
+    if not np.any(usable):
+        raise ServantError(
+            f"{path}: no window gives features that are finite numbers; "
+            "the file is damaged, record it again"
+        )
+    if not np.all(usable):
+        _warn(
+            ServantError(
+                f"{path}: windows {', '.join(map(str, np.flatnonzero(~usable)))}: "
+                "features not finite numbers"
+            )
+        )
+    return X[usable], usable
+
+
+def _predict_pictures(
+    args: argparse.Namespace, model: dict[str, Recogniser]
+) -> tuple[list[dict[str, Any]], list[str], list[Said]]:
+    """The place of each `--image` picture: as JSON rows, as lines, and the opinions (for the
+    decision). Confidences are shown as the live engine shows them: beside a sound that knows
+    elsewhere, not as shares."""
+    visual = _role(model, "visual", args.model)
+    X = checked_rows(visual.featurize([read_picture(p) for p in args.image]), "pictures")
+    predictions = said_of(visual, X)
+    closed_beside_open = beside_open_sound(model.get("acoustic"), visual)
+    figures = [
+        shown(None if s == UNKNOWN else s, c, visual.confidence_unit, p or {}, closed_beside_open)
+        for s, c, p in predictions
+    ]
+    rows = [
+        {"picture": str(p), "scene": s, "confidence": c, "confidence_unit": unit}
+        for p, (s, _, _), (c, unit) in zip(args.image, predictions, figures, strict=True)
+    ]
+    lines = [
+        f"Visual {p.name}: {_judged(s, c, unit)}"
+        for p, (s, _, _), (c, unit) in zip(args.image, predictions, figures, strict=True)
+    ]
+    return rows, lines, predictions
+
+
+def _predict_decision(
+    args: argparse.Namespace,
+    model: dict[str, Recogniser],
+    fusion: FusionNet | None,
+    first_acoustic: Said,
+    visual_predictions: list[Said],
+) -> tuple[dict[str, Any], str]:
+    """The decision, as JSON and as a line, through the pipeline the live engine decides with:
+    a learned net saved with the model by `train --learned-fusion` (without one, its fallback),
+    or a rule policy."""
+    config = _fusion_config(args)
+    policy = (
+        LearnedFusion(config, fusion) if args.policy == "learned" else POLICIES[args.policy](config)
+    )
+    open_roles = [r for r in ("acoustic", "visual") if knows_elsewhere(model.get(r))]
+    decision = run_encounter(policy, config, first_acoustic, visual_predictions, open_roles)
+    shared = decision_unit(model.get("acoustic"), model.get("visual"))
+    said = "sure it is here and not elsewhere" if decision.not_elsewhere else "average confidence"
+    entry = {
+        "scene": decision.scene,
+        "line": decision.line,
+        "confidence": decision.confidence,
+        "confidence_unit": shared,
+        "leaned_on": list(decision.leaned_on),
+    }
+    average = confidence_text(decision.confidence, shared)
+    return entry, f"{decision.line} ({said} {average})"
 
 
 def _judged(scene: str, confidence: float, unit: str | None) -> str:

@@ -27,7 +27,29 @@ COMMANDS = "servant_core.cli.recognition"
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    train = subparsers.add_parser("train")
+    """Add `train`, `predict`, `eval audio|image|fusion` and `table` with their options; each
+    runs its `cmd_*` of `servant_core.cli.recognition`."""
+    _register_train(subparsers.add_parser("train"))
+    _register_predict(subparsers.add_parser("predict"))
+    senses = subparsers.add_parser("eval").add_subparsers(
+        dest="sense", metavar="SENSE", required=True
+    )
+    _register_eval_audio(
+        senses.add_parser(
+            "audio", help="acoustic recognition: temporal, recording, source or fewshot protocol"
+        )
+    )
+    _register_eval_image(
+        senses.add_parser("image", help="visual recognition: train library vs test library")
+    )
+    _register_eval_fusion(
+        senses.add_parser("fusion", help="fused decisions over paired windows and pictures")
+    )
+    _register_table(subparsers.add_parser("table"))
+
+
+def _register_train(train: argparse.ArgumentParser) -> None:
+    """`servant train ROOT`: where the model goes, the methods, windows and learned fusion."""
     train.add_argument("root", type=Path, help="scene library: ROOT/<scene>/<recordings, pictures>")
     train.add_argument(
         "-o",
@@ -54,7 +76,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _json_option(train)
     train.set_defaults(handler=later(COMMANDS, "cmd_train"))
 
-    predict = subparsers.add_parser("predict")
+
+def _register_predict(predict: argparse.ArgumentParser) -> None:
+    """`servant predict MODEL`: a recording and/or pictures, and the fusion's options."""
     predict.add_argument("model", type=Path, help="model file from `servant train`")
     predict.add_argument("--audio", type=Path, help="a recording: each window is recognised")
     predict.add_argument("--image", type=Path, nargs="+", default=[], help="pictures, in order")
@@ -62,12 +86,38 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _json_option(predict)
     predict.set_defaults(handler=later(COMMANDS, "cmd_predict"))
 
-    evaluate = subparsers.add_parser("eval")
-    senses = evaluate.add_subparsers(dest="sense", metavar="SENSE", required=True)
-    audio = senses.add_parser(
-        "audio", help="acoustic recognition: temporal, recording, source or fewshot protocol"
-    )
+
+def _register_eval_audio(audio: argparse.ArgumentParser) -> None:
+    """`servant eval audio ROOT`: the protocol, the method and which scenes to keep."""
     audio.add_argument("root", type=Path, help="training recordings (and test, without --test)")
+    _protocol_options(audio)
+    audio.add_argument(
+        "--method",
+        choices=sorted(ACOUSTIC_METHOD_NAMES),
+        default=FRESH_AUDIO_METHOD,
+        help=(
+            "acoustic method (paper: the paper's FFT K-Means; birdnet: BirdNET's network, "
+            "non-commercial use only, CC BY-NC-SA 4.0; kmeans-encoder: Servant's own)"
+        ),
+    )
+    audio.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
+    audio.add_argument(
+        "--min-recordings",
+        type=options.bounded_int(1, 10_000),
+        default=1,
+        metavar="N",
+        help="keep only the scenes with at least N recordings (default: %(default)s)",
+    )
+    _seeds_option(audio)
+    _audio_options(audio)
+    _skip_bad_option(audio)
+    _json_option(audio)
+    audio.set_defaults(handler=later(COMMANDS, "cmd_eval_audio"))
+
+
+def _protocol_options(audio: argparse.ArgumentParser) -> None:
+    """`eval audio`'s split of the recordings: `--protocol` and what some protocols take
+    (`--groups`, `--shots`), or `--test` for another library."""
     audio.add_argument(
         "--protocol",
         choices=list(EVAL_PROTOCOLS),
@@ -95,29 +145,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="fewshot: comma-separated windows per recording that train "
         f"(default: {','.join(map(str, DEFAULT_SHOTS))})",
     )
-    audio.add_argument(
-        "--method",
-        choices=sorted(ACOUSTIC_METHOD_NAMES),
-        default=FRESH_AUDIO_METHOD,
-        help=(
-            "acoustic method (paper: the paper's FFT K-Means; birdnet: BirdNET's network, "
-            "non-commercial use only, CC BY-NC-SA 4.0; kmeans-encoder: Servant's own)"
-        ),
-    )
-    audio.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
-    audio.add_argument(
-        "--min-recordings",
-        type=options.bounded_int(1, 10_000),
-        default=1,
-        metavar="N",
-        help="keep only the scenes with at least N recordings (default: %(default)s)",
-    )
-    _seeds_option(audio)
-    _audio_options(audio)
-    _skip_bad_option(audio)
-    _json_option(audio)
-    audio.set_defaults(handler=later(COMMANDS, "cmd_eval_audio"))
-    image = senses.add_parser("image", help="visual recognition: train library vs test library")
+
+
+def _register_eval_image(image: argparse.ArgumentParser) -> None:
+    """`servant eval image ROOT`: a test library or a split of ROOT, and the method."""
     image.add_argument("root", type=Path, help="training pictures")
     image.add_argument(
         "--test", type=Path, help="test pictures (default: split ROOT by file order)"
@@ -139,7 +170,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _skip_bad_option(image)
     _json_option(image)
     image.set_defaults(handler=later(COMMANDS, "cmd_eval_image"))
-    fusion = senses.add_parser("fusion", help="fused decisions over paired windows and pictures")
+
+
+def _register_eval_fusion(fusion: argparse.ArgumentParser) -> None:
+    """`servant eval fusion ROOT`: the methods, the fusion's options and a sense to withhold."""
     fusion.add_argument("root", type=Path, help="library with recordings and pictures per scene")
     _method_options(fusion)
     fusion.add_argument("--scenes", help="comma-separated scenes to keep (default: all paired)")
@@ -154,7 +188,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _json_option(fusion)
     fusion.set_defaults(handler=later(COMMANDS, "cmd_eval_fusion"))
 
-    table = subparsers.add_parser("table")
+
+def _register_table(table: argparse.ArgumentParser) -> None:
+    """`servant table LIBRARY`: the paper's methods by default, an optional test library."""
     table.add_argument("library", type=Path, help="scene library with recordings and pictures")
     table.add_argument("--test", type=Path, help="take the test recording and picture from here")
     table.add_argument(

@@ -65,61 +65,30 @@ def build_demo_engine(
     policy: str | None = None,
 ) -> Engine:
     """The built-in demo: recognisers trained on freshly synthesised scenes (a couple of seconds),
-    then the synthesised walk (see `servant_core.demo.scenes`). By default Servant at its best:
-    the fresh methods (`FRESH_METHODS`) in percentages, smoothed, with the parallel policy;
-    `paper` gives the paper's recognisers (eqs. 1 and 2) and its sequential 30 s / 20 s policy.
-    With `arm`, an emulated arm (`servant_core.demo.arm`), disarmed, that the engine closes when
-    it stops. With `library_root`, the demo's training scenes are written there as a scene
-    library (the demo's own throw-away space: see `servant_core.demo.space`), for the library
-    screen and retrains (`write_library=False`: not written, for a front end with neither; a
-    place labelled still goes there). `on_progress(done, total)` follows the training (the slow
-    part).
-    `policy` names the fusion policy (default: as above); "learned" teaches its net on the
-    demo's library first (a few seconds more).
-
-    `realtime=False` runs the walk as fast as possible on a `ManualClock` (pass your own to read
-    it), so events — times included — are the same on every run: use `engine.run_until(t)` for a
-    thread-free deterministic run, or `start()` to stream them. With `realtime=True` the walk
-    plays at real speed on `clock` (default: monotonic time).
-    """
-    from servant_core.demo.motion_synth import write_sensor_library
-    from servant_core.demo.scenes import (
-        TRAINING_STEPS,
-        DemoCamera,
-        demo_audio,
-        train_demo_recognisers,
-        training_set,
-        write_demo_library,
-    )
+    then the synthesised walk (`servant_core.demo.scenes`). By default the fresh methods, smoothed,
+    with the parallel policy; `paper`: the paper's recognisers (eqs. 1 and 2) and its sequential
+    policy; `policy` names another ("learned" first teaches its net on the demo's library).
+    `arm`: an emulated arm, disarmed. `library_root`: where the demo's training scenes are written
+    as a library (not with `write_library=False`; a place labelled still goes there).
+    `on_progress(done, total)` follows the training. `realtime=False` runs the walk as fast as
+    possible on a `ManualClock` (pass your own to read it), the same events, times included, on
+    every run; `realtime=True` plays it at real speed on `clock` (default: monotonic time)."""
+    from servant_core.demo.scenes import DemoCamera, demo_audio
     from servant_core.demo.sensors import demo_sensor_sources, train_sensor_recognisers
 
-    if not realtime:
-        clock = clock if isinstance(clock, ManualClock) else ManualClock()
-    clock = clock or MonotonicClock()
-    total = TRAINING_STEPS
-    if on_progress is not None:
-        on_progress(0, total)  # the modules loaded: the work, and its estimate, begin
-    training = training_set(
-        seed, on_progress=None if on_progress is None else lambda done, _: on_progress(done, total)
-    )
-    acoustic, visual = train_demo_recognisers(
-        seed, paper=paper, on_progress=on_progress, training=training
-    )
+    clock = _demo_clock(clock, realtime)
+    training, acoustic, visual = _train_demo_scenes(seed, paper, on_progress)
     samples, stop_emulator = demo_sensor_sources(
         seed, clock=clock if isinstance(clock, ManualClock) and not realtime else None
     )
     sensing = train_sensor_recognisers(seed)
     if library_root is not None and write_library:
-        write_demo_library(library_root, seed, training)
-        write_sensor_library(library_root, seed)
+        _write_demo_libraries(library_root, seed, training)
     audio = demo_audio(seed, realtime=realtime, clock=clock if not realtime else None)
     why = None
     if fusion is None:
-        policy = policy or ("sequential" if paper else DEFAULT_POLICY)
-        net, why = None, None
-        if policy == "learned":
-            net, why = demo_fusion_net(seed, {"audio": acoustic, "image": visual, **sensing})
-        fusion = live_policy(policy, FusionConfig(), net)
+        name = policy or ("sequential" if paper else DEFAULT_POLICY)
+        fusion, why = _demo_policy(name, seed, {"audio": acoustic, "image": visual, **sensing})
     engine = Engine(
         audio=audio,
         camera=DemoCamera(clock, seed),
@@ -135,21 +104,73 @@ def build_demo_engine(
     if stop_emulator is not None:
         engine.add_cleanup(stop_emulator)
     engine.subscribe(walk_narrator(engine))
-    if fusion is not None and why is not None:
+    if why is not None:
         engine.note(f"learned fusion: {why}; the parallel policy decides")
     if arm:
-        from servant_core.demo.arm import demo_learner, start_demo_arm
-
-        emulator, link = start_demo_arm()
-        engine.add_cleanup(emulator.stop)
-        engine.add_cleanup(link.close)  # runs first: the link closes before its emulator
-        engine.set_arm(link)
-        engine.set_action_learner(pose_for_taught(demo_learner()))
-        from servant_core.settings import Settings
-
-        # what Settings shows in the demo: the emulated arm's port, not the empty default
-        engine.user_settings = Settings(serial_port=link.port, protocol=link.protocol.name)
+        _attach_demo_arm(engine)
     return engine
+
+
+def _demo_clock(clock: Callable[[], float] | None, realtime: bool) -> Callable[[], float]:
+    """The demo's clock: `clock` when given (a `ManualClock` when not `realtime`), else a fresh
+    `ManualClock`, or monotonic time in real time."""
+    if not realtime:
+        clock = clock if isinstance(clock, ManualClock) else ManualClock()
+    return clock or MonotonicClock()
+
+
+def _train_demo_scenes(
+    seed: int, paper: bool, on_progress: Callable[[int, int], None] | None
+) -> tuple[Any, Any, Any]:
+    """The demo's synthesised training set, and the sound and picture recognisers trained on it
+    (`paper`: the paper's); `on_progress(done, total)` follows both, over one total."""
+    from servant_core.demo.scenes import TRAINING_STEPS, train_demo_recognisers, training_set
+
+    total = TRAINING_STEPS
+    if on_progress is not None:
+        on_progress(0, total)  # the modules loaded: the work, and its estimate, begin
+    training = training_set(
+        seed, on_progress=None if on_progress is None else lambda done, _: on_progress(done, total)
+    )
+    acoustic, visual = train_demo_recognisers(
+        seed, paper=paper, on_progress=on_progress, training=training
+    )
+    return training, acoustic, visual
+
+
+def _write_demo_libraries(library_root: str | Path, seed: int, training: Any) -> None:
+    """The demo's training scenes and sensor logs, written under `library_root` as a library."""
+    from servant_core.demo.motion_synth import write_sensor_library
+    from servant_core.demo.scenes import write_demo_library
+
+    write_demo_library(library_root, seed, training)
+    write_sensor_library(library_root, seed)
+
+
+def _demo_policy(
+    name: str, seed: int, recognisers: dict[str, Any]
+) -> tuple[FusionPolicy, str | None]:
+    """The demo's fusion policy named `name`; "learned" with its net taught on the demo's
+    library, and why there is none when it could not be taught (None otherwise)."""
+    net, why = None, None
+    if name == "learned":
+        net, why = demo_fusion_net(seed, recognisers)
+    return live_policy(name, FusionConfig(), net), why
+
+
+def _attach_demo_arm(engine: Engine) -> None:
+    """An emulated arm, disarmed, with the demo's taught poses; its link and emulator close when
+    the engine stops, and Settings shows its port."""
+    from servant_core.demo.arm import demo_learner, start_demo_arm
+    from servant_core.settings import Settings
+
+    emulator, link = start_demo_arm()
+    engine.add_cleanup(emulator.stop)
+    engine.add_cleanup(link.close)  # runs first: the link closes before its emulator
+    engine.set_arm(link)
+    engine.set_action_learner(pose_for_taught(demo_learner()))
+    # what Settings shows in the demo: the emulated arm's port, not the empty default
+    engine.user_settings = Settings(serial_port=link.port, protocol=link.protocol.name)
 
 
 def demo_fusion_net(seed: int, recognisers: dict[str, Any]) -> tuple[FusionNet | None, str | None]:

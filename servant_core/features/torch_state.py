@@ -169,83 +169,12 @@ def read_pickle(stream: IO[bytes], persistent: Callable[[Any], Any] = _storage) 
                 break
             if name in ("PROTO", "FRAME"):
                 continue
-            if name == "MARK":
-                stack.append(MARK)
-            elif name == "POP":
-                stack.pop()
-            elif name == "POP_MARK":
-                _pop_mark(stack)
-            elif name == "DUP":
-                stack.append(stack[-1])
-            elif name == "NONE":
-                stack.append(None)
-            elif name in ("NEWTRUE", "NEWFALSE"):
-                stack.append(name == "NEWTRUE")
-            elif name in VALUE_OPCODES:
-                stack.append(arg)
-            elif name in ("PUT", "BINPUT", "LONG_BINPUT"):
-                memo[int(arg)] = stack[-1]
-            elif name == "MEMOIZE":
-                memo[len(memo)] = stack[-1]
-            elif name in ("GET", "BINGET", "LONG_BINGET"):
-                stack.append(memo[int(arg)])
-            elif name == "EMPTY_TUPLE":
-                stack.append(())
-            elif name in ("TUPLE1", "TUPLE2", "TUPLE3"):
-                n = int(name[-1])
-                grouped = tuple(stack[-n:])
-                del stack[-n:]
-                stack.append(grouped)
-            elif name == "TUPLE":
-                stack.append(tuple(_pop_mark(stack)))
-            elif name == "EMPTY_LIST":
-                stack.append([])
-            elif name == "LIST":
-                stack.append(_pop_mark(stack))
-            elif name == "APPEND":
-                value = stack.pop()
-                _container(stack[-1], list).append(value)
-            elif name == "APPENDS":
-                items = _pop_mark(stack)
-                _container(stack[-1], list).extend(items)
-            elif name == "EMPTY_DICT":
-                stack.append({})
-            elif name == "DICT":
-                items = _pop_mark(stack)
-                stack.append(dict(zip(items[::2], items[1::2], strict=True)))
-            elif name == "SETITEM":
-                value, key = stack.pop(), stack.pop()
-                _container(stack[-1], dict)[_key(key)] = value
-            elif name == "SETITEMS":
-                items = _pop_mark(stack)
-                target = _container(stack[-1], dict)
-                for key, value in zip(items[::2], items[1::2], strict=True):
-                    target[_key(key)] = value
-            elif name in ("GLOBAL", "STACK_GLOBAL"):
-                if name == "GLOBAL":
-                    qualified = str(arg)
-                else:
-                    attribute, module = stack.pop(), stack.pop()
-                    qualified = f"{module} {attribute}"
-                if qualified not in ALLOWED_GLOBALS:
-                    raise TorchStateError(
-                        f"the pickle asks for {qualified.replace(' ', '.')}, which a state dict "
-                        "of tensors never does; refused, nothing was run"
-                    )
-                stack.append(Global(qualified))
-            elif name == "REDUCE":
-                args, function = stack.pop(), stack.pop()
-                if not isinstance(function, Global):
-                    raise TorchStateError(f"the pickle calls {type(function).__name__}")
-                stack.append(_rebuild(function, args))
-            elif name == "BUILD":
-                state = stack.pop()
-                # an OrderedDict's attributes (a module's `_metadata`: versions, not tensors)
-                if not isinstance(stack[-1], dict) or not isinstance(state, (dict, type(None))):
-                    raise TorchStateError("the pickle sets the state of something not a dict")
-            elif name in ("BINPERSID", "PERSID"):
-                stack.append(persistent(stack.pop() if name == "BINPERSID" else arg))
-            else:  # pragma: no cover - every allowed opcode has a branch above
+            handled = (
+                _stack_op(name, arg, stack, memo)
+                or _collection_op(name, stack)
+                or _call_op(name, arg, stack, persistent)
+            )
+            if not handled:  # pragma: no cover - every allowed opcode has a branch
                 raise TorchStateError(f"pickle opcode {name} is not handled")
         else:
             raise TorchStateError("the pickle ends without STOP")
@@ -254,6 +183,113 @@ def read_pickle(stream: IO[bytes], persistent: Callable[[Any], Any] = _storage) 
     if len(stack) != 1:
         raise TorchStateError("the pickle leaves no single value")
     return stack[0]
+
+
+def _stack_op(name: str, arg: Any, stack: list[Any], memo: dict[int, Any]) -> bool:
+    """Runs a stack opcode (marks, POP, DUP), a constant or value that it pushes, or a memo
+    opcode (PUT, GET); False for any other opcode, with `stack` and `memo` untouched."""
+    if name == "MARK":
+        stack.append(MARK)
+    elif name == "POP":
+        stack.pop()
+    elif name == "POP_MARK":
+        _pop_mark(stack)
+    elif name == "DUP":
+        stack.append(stack[-1])
+    elif name == "NONE":
+        stack.append(None)
+    elif name in ("NEWTRUE", "NEWFALSE"):
+        stack.append(name == "NEWTRUE")
+    elif name in VALUE_OPCODES:
+        stack.append(arg)
+    elif name in ("PUT", "BINPUT", "LONG_BINPUT"):
+        memo[int(arg)] = stack[-1]
+    elif name == "MEMOIZE":
+        memo[len(memo)] = stack[-1]
+    elif name in ("GET", "BINGET", "LONG_BINGET"):
+        stack.append(memo[int(arg)])
+    else:
+        return False
+    return True
+
+
+def _collection_op(name: str, stack: list[Any]) -> bool:
+    """Runs an opcode that builds a tuple, or builds or fills a list or a dict (keys only names
+    or numbers); False for any other opcode, with `stack` untouched."""
+    if name == "EMPTY_TUPLE":
+        stack.append(())
+    elif name in ("TUPLE1", "TUPLE2", "TUPLE3"):
+        n = int(name[-1])
+        grouped = tuple(stack[-n:])
+        del stack[-n:]
+        stack.append(grouped)
+    elif name == "TUPLE":
+        stack.append(tuple(_pop_mark(stack)))
+    elif name == "EMPTY_LIST":
+        stack.append([])
+    elif name == "LIST":
+        stack.append(_pop_mark(stack))
+    elif name == "APPEND":
+        value = stack.pop()
+        _container(stack[-1], list).append(value)
+    elif name == "APPENDS":
+        items = _pop_mark(stack)
+        _container(stack[-1], list).extend(items)
+    elif name == "EMPTY_DICT":
+        stack.append({})
+    elif name == "DICT":
+        items = _pop_mark(stack)
+        stack.append(dict(zip(items[::2], items[1::2], strict=True)))
+    elif name == "SETITEM":
+        value, key = stack.pop(), stack.pop()
+        _container(stack[-1], dict)[_key(key)] = value
+    elif name == "SETITEMS":
+        items = _pop_mark(stack)
+        target = _container(stack[-1], dict)
+        for key, value in zip(items[::2], items[1::2], strict=True):
+            target[_key(key)] = value
+    else:
+        return False
+    return True
+
+
+def _call_op(name: str, arg: Any, stack: list[Any], persistent: Callable[[Any], Any]) -> bool:
+    """Runs an opcode that names or calls something, without importing or calling anything: an
+    allowed name becomes a `Global`, REDUCE a value `_rebuild` makes, a persistent id what
+    `persistent` makes of it; any other name or call is refused. False for any other opcode."""
+    if name in ("GLOBAL", "STACK_GLOBAL"):
+        stack.append(_global(name, arg, stack))
+    elif name == "REDUCE":
+        args, function = stack.pop(), stack.pop()
+        if not isinstance(function, Global):
+            raise TorchStateError(f"the pickle calls {type(function).__name__}")
+        stack.append(_rebuild(function, args))
+    elif name == "BUILD":
+        state = stack.pop()
+        # an OrderedDict's attributes (a module's `_metadata`: versions, not tensors)
+        if not isinstance(stack[-1], dict) or not isinstance(state, (dict, type(None))):
+            raise TorchStateError("the pickle sets the state of something not a dict")
+    elif name in ("BINPERSID", "PERSID"):
+        stack.append(persistent(stack.pop() if name == "BINPERSID" else arg))
+    else:
+        return False
+    return True
+
+
+def _global(name: str, arg: Any, stack: list[Any]) -> Global:
+    """The name GLOBAL (its argument) or STACK_GLOBAL (module and attribute popped off `stack`)
+    asks for, if `ALLOWED_GLOBALS` has it; TorchStateError otherwise."""
+    if name == "GLOBAL":
+        qualified = str(arg)
+    else:
+        attribute, module = stack.pop(), stack.pop()
+        qualified = f"{module} {attribute}"
+    if qualified not in ALLOWED_GLOBALS:
+        raise TorchStateError(
+            f"the pickle asks for {qualified.replace(' ', '.')}, which a state dict "
+            "of tensors never does; refused, nothing was run"
+        )
+    return Global(qualified)
 
 
 def _container(value: Any, kind: type) -> Any:
