@@ -20,6 +20,7 @@ from typing import Any
 from servant_core.errors import ServantError
 from servant_core.json_objects import unique_keys
 from servant_core.numbers import is_finite_number, json_loads
+from servant_core.settings import MAX_ABS_ANGLE
 from servant_core.storage import (
     atomic_write_bytes,
     check_replaceable,
@@ -83,6 +84,21 @@ def _finite_map(value: Any, what: str) -> dict[str, float]:
     return out
 
 
+def _pose(value: Any) -> dict[str, float]:
+    """A record's pose: an angle a joint can take for each joint named. A pose is clamped to
+    its joints' limits when it is taught, and no joint's limits go beyond `MAX_ABS_ANGLE`: an
+    angle past them was written by hand (two of 1e308 made the learner's mean infinite, and its
+    training a traceback)."""
+    pose = _finite_map(value, "pose")
+    for joint, angle in pose.items():
+        if abs(angle) > MAX_ABS_ANGLE:
+            raise ValueError(
+                f"pose[{joint!r}] is {angle:g} degrees, beyond any joint's "
+                f"{-MAX_ABS_ANGLE:g}..{MAX_ABS_ANGLE:g}"
+            )
+    return pose
+
+
 def _record(raw: Any) -> TeachRecord:
     if not isinstance(raw, Mapping):
         raise ValueError("not an object")
@@ -104,7 +120,7 @@ def _record(raw: Any) -> TeachRecord:
     return TeachRecord(
         scene=scene,
         scores={s: _finite_map(v, f"scores[{s!r}]") for s, v in scores.items()},
-        pose=_finite_map(raw.get("pose"), "pose"),
+        pose=_pose(raw.get("pose")),
         t=float(t),
         source=source,
         notes=list(notes),
@@ -291,7 +307,13 @@ def append_record(
 ) -> list[TeachRecord]:
     """Add `record` to the file, atomically; returns every record now in it."""
     path = Path(path) if path is not None else default_records_path()
-    _record(_fields(record))  # the same checks a reader applies: never write what cannot be read
+    try:  # the same checks a reader applies: never write what cannot be read
+        _record(_fields(record))
+    except ValueError as exc:
+        raise ServantError(
+            f"{path}: the teach record for {record.scene!r} was not added ({exc}); the file "
+            "is unchanged: correct that and add it again"
+        ) from None
     version, records, lines = _load(path, legacy_joint) if path.exists() else (VERSION, [], [])
     if version < VERSION:
         backup = path.with_name(f"{path.name}.v{version}.bak")
