@@ -183,6 +183,18 @@ class Engine:
 
         self._bus = EventBus(self.clock)
         self._arm = ArmControl(self._bus, reopen_seconds)
+        self._make_senses(audio, camera, spectrum_fps, spectrum_size)
+        self._init_state()
+
+    def _make_senses(
+        self,
+        audio: AudioSource | None,
+        camera: FrameSource | None,
+        spectrum_fps: float,
+        spectrum_size: int,
+    ) -> None:
+        """The threads' handles on each sense: hearing, sight and a feeling a sample sense."""
+        reopen_seconds = self.reopen_seconds
         self._hearing = (
             Hearing(
                 audio,
@@ -212,6 +224,9 @@ class Engine:
             )
             for sense, source in self.samples.items()
         ]
+
+    def _init_state(self) -> None:
+        """Locks, the run's lifecycle, and what the engine remembers between windows."""
         self._lock = threading.RLock()  # models, fusion, scores
         self._update_lock = threading.Lock()  # one model update (retrain, fold-in) at a time
         self._stop = threading.Event()
@@ -227,7 +242,7 @@ class Engine:
         # the sound's last windows (and their rates) while it names no taught place, up to
         # `ask_after_s` of them: when "What is this place?" is asked and what its label is for
         self._unknown_windows: deque[tuple[np.ndarray, int]] = deque(
-            maxlen=max(1, round(ask_after_s / self.window_seconds))
+            maxlen=max(1, round(self.ask_after_s / self.window_seconds))
         )
         self._silent = False  # the last window was silence (its notice was given)
         # the predictions whose last window was skipped as unusable: told once, not each window
