@@ -185,6 +185,8 @@ class Steadying:
     @contextlib.contextmanager
     def watching(self, clock: ManualClock) -> Iterator[None]:
         """The engine's decisions, through its `DecisionPipeline`, hear this `steady_open`."""
+        if getattr(pipeline, "steady_open", None) is not elsewhere.steady_open:
+            raise SystemExit("the decision pipeline no longer calls steady_open: update this bench")
         self.alone = []
         pipeline.steady_open = functools.partial(self.steady_open, clock)  # type: ignore[assignment]
         try:
