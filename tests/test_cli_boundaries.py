@@ -223,8 +223,6 @@ def all_parsers():
 
 def test_every_option_has_help_and_help_shows_defaults():
     for parser in all_parsers():
-        if parser.prog.split()[1:2] in (["teach"], ["servo"], ["emulate-servo"]):
-            continue  # the arm's commands (servant_core/cli/arm.py) are checked with the arm
         for action in parser._actions:
             if isinstance(action, argparse._SubParsersAction):
                 continue  # its subcommands each carry their own help
