@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import re
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -97,11 +98,24 @@ def servant(*args: str, env: dict[str, str] | None = None) -> subprocess.Complet
     )
 
 
+def ctrl_c_as_in_a_terminal() -> None:
+    """In a child, before Python starts: Ctrl-C as a terminal delivers it. Tests started in the
+    background by a non-interactive shell (`make test &`) inherit SIGINT ignored, and a Python
+    started so never sees Ctrl-C at all: a test sending it would fail, saying nothing of
+    Servant."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def serve(*args: str) -> tuple[subprocess.Popen[str], str]:
     """`servant ARGS` (an emulator) in its own process, and the port its first line names
-    ("… on PORT; …" or "… on PORT …"); the caller stops the process."""
+    ("… on PORT; …" or "… on PORT …"); the caller stops the process (Ctrl-C reaches it as in a
+    terminal)."""
     proc = subprocess.Popen(
-        [sys.executable, "-m", "servant_tui", *args], stdout=subprocess.PIPE, text=True, cwd=REPO
+        [sys.executable, "-m", "servant_tui", *args],
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=REPO,
+        preexec_fn=ctrl_c_as_in_a_terminal,
     )
     assert proc.stdout is not None
     first = proc.stdout.readline()

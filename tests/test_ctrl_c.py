@@ -15,21 +15,13 @@ import time
 
 import pytest
 
-from tests.conftest import REPO
+from tests.conftest import REPO, ctrl_c_as_in_a_terminal
 
 CONSOLE_SCRIPT = (
     "import os, sys; os.write(1, b'R'); "
     "from servant_tui.main import main; sys.exit(main())"  # what pip's `servant` script runs
 )
 SERVANT = "import sys; from servant_tui.main import main; sys.exit(main())"  # no 'R' first
-
-
-def ctrl_c_as_in_a_terminal() -> None:
-    """In the child, before Python starts: Ctrl-C as a terminal delivers it. Tests started in
-    the background by a non-interactive shell (`make test &`) inherit SIGINT ignored, and a
-    Python started so never sees Ctrl-C at all: every test here would fail, saying nothing of
-    Servant."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def interrupted(script: str, tmp_path, after: float = 0.0) -> tuple[bytes, int]:
