@@ -40,15 +40,13 @@ from servant_core.errors import ServantError
 from servant_core.library import SceneLibrary
 from servant_core.place_names import place_key, place_name
 from servant_core.servo.calibration import clamp_pose
-from servant_core.settings import Settings, default_joints
+from servant_core.settings import default_joints
 from tests.cli_harness import assert_clear, assert_refused, run_cli
 from tests.test_fuzz_files import Workspace, fuzz, mutated_model
 from tests.test_fuzz_settings import (
     beyond_floats,
-    encoded,
-    objects_in,
+    given_twice,
     parsed_values,
-    valid_records,
 )
 from tests.test_hardening_untried import records_text
 from tests.test_terminal_escapes import CONTROL
@@ -445,17 +443,7 @@ def test_fuzz_a_key_given_twice_stops_the_command_in_one_line(
     file (`servant teach --records`), at any depth, holding one of its keys or any key twice:
     one `servant: error:` line naming the file and the key, before anything is asked or sent;
     the file unchanged and nothing written beside it."""
-    document = valid_records() if records else Settings().to_json()
-    where = objects_in(document)
-    twice = where[pick % len(where)]
-    target = document
-    for step in twice:
-        target = target[step]
-    own = sorted(target)
-    key = own[pick % len(own)] if new_key is None and own else (new_key or "")
-    if key not in target:
-        target[key] = value  # written once here, and once more by `encoded`
-    content = encoded(document, twice, key, value, at).encode()
+    content, key = given_twice(records, pick, new_key, value, at)
     folder = tmp_path_factory.mktemp("twice")
     path = folder / ("records.json" if records else "settings.json")
     path.write_bytes(content)

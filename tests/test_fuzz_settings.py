@@ -274,6 +274,22 @@ def encoded(node: Any, twice: tuple, key: str, value: Any, at: int, prefix: tupl
     return "{" + ", ".join(members) + "}"
 
 
+def given_twice(records: bool, pick: int, new_key: str | None, value: object, at: int):
+    """(the bytes of a valid settings or teach-record file with one key given twice in one of
+    its objects, that key): one of the object's own keys again, or `new_key` written twice."""
+    document = valid_records() if records else Settings().to_json()
+    where = objects_in(document)
+    twice = where[pick % len(where)]
+    target = document
+    for step in twice:
+        target = target[step]
+    own = sorted(target)
+    key = own[pick % len(own)] if new_key is None and own else (new_key or "")
+    if key not in target:
+        target[key] = value  # written once here, and once more by `encoded`
+    return encoded(document, twice, key, value, at).encode(), key
+
+
 @FUZZ
 @given(
     records=st.booleans(),
@@ -287,17 +303,7 @@ def test_any_key_given_twice_is_refused_naming_it(tmp_path, records, pick, new_k
     `max_angle` silently won. Any object of a settings or teach record file holding a key twice
     (one of its own keys again, or any key written twice) is refused in one line naming the key,
     and the file is left as it was."""
-    document = valid_records() if records else Settings().to_json()
-    where = objects_in(document)
-    twice = where[pick % len(where)]
-    target = document
-    for step in twice:
-        target = target[step]
-    own = sorted(target)
-    key = own[pick % len(own)] if new_key is None and own else (new_key or "")
-    if key not in target:
-        target[key] = value  # written once here, and once more by `encoded`
-    content = encoded(document, twice, key, value, at).encode()
+    content, key = given_twice(records, pick, new_key, value, at)
     path = tmp_path / "file.json"
     path.write_bytes(content)
     with pytest.raises(ServantError) as refused:
