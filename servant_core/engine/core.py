@@ -87,8 +87,6 @@ log = logging.getLogger(__name__)
 # paper's 30 s acoustic window, so a passing odd moment is never asked about.
 ASK_AFTER_S = 30.0
 
-ROLES = {sense: spec.role for sense, spec in SENSES.items()}  # a sense's name -> its role
-
 NO_MODEL = (
     "no model yet: nothing can be recognised until two scenes are taught (teach mode, key t: "
     "six 5 s recordings and a few pictures of each, then Retrain) or trained from a library "
@@ -599,7 +597,7 @@ class Engine:
             scene = event.scene
             with self._lock:
                 unit = decision_unit(self.acoustic, self.visual)
-                event, roles = self.decisions.settle(event, ROLES)
+                event, roles = self.decisions.settle(event)
                 latest = self.decisions.latest()  # one snapshot for the figure and the arm
                 open_roles = set(self.decisions.open_roles)
             event = dataclasses.replace(event, confidence_unit=unit)

@@ -16,11 +16,12 @@ from servant_core.fusion.elsewhere import open_decision, steady_open
 from servant_core.fusion.sequential import FusionConfig, scene_line
 from servant_core.fusion.smoothing import SceneSmoother
 from servant_core.recognisers.base import UNKNOWN
+from servant_core.senses import SENSES
 
 Said = tuple[str, float, dict[str, float] | None]
 """One sense's opinion: its scene (or UNKNOWN), its confidence, its scores (None: not given)."""
 
-ROLE_OF = {"audio": "acoustic", "image": "visual"}  # the two senses every policy hears
+ROLE_OF = {sense: SENSES[sense].role for sense in ("audio", "image")}  # what every policy hears
 
 
 class DecisionPipeline:
@@ -125,14 +126,12 @@ class DecisionPipeline:
     def state(self, t: float) -> FusionState:
         return self.policy.state(t)  # type: ignore[no-any-return]
 
-    def settle(
-        self, decision: Decision, roles_of: dict[str, str]
-    ) -> tuple[Decision, tuple[str, ...]]:
+    def settle(self, decision: Decision) -> tuple[Decision, tuple[str, ...]]:
         """A policy's decision of a place as the wearer and the arm take it, and the roles it
-        rests on (`roles_of`: sense -> role, for the senses it leaned on). A sense that knows
+        rests on (those of the senses it leaned on, `SENSES`). A sense that knows
         somewhere else and has spoken has its say, leaned on or not: pictures alone (a learned
         net's choice) cannot tell a taught place from elsewhere."""
-        roles = tuple(roles_of[s] for s in decision.leaned_on if s in roles_of)
+        roles = tuple(SENSES[s].role for s in decision.leaned_on if s in SENSES)
         roles = roles or tuple(ROLE_OF.values())
         heard_open = sorted(r for r in self.open_roles if self.scores.get(r))
         if heard_open and not decision.not_elsewhere and decision.scene is not None:
@@ -160,7 +159,7 @@ class DecisionPipeline:
         while t <= horizon:
             for event in events:
                 if isinstance(event, Decision):
-                    return self.settle(event, ROLE_OF)[0] if event.scene else event
+                    return self.settle(event)[0] if event.scene else event
             t = round(t + step, 9)
             events = self.tick(t)
             if not events and visual and self.wants_picture(t):
