@@ -142,6 +142,33 @@ def test_rate_limit_never_jumps_after_a_pause():
     assert link.status().angles["shoulder"] == 90.0
 
 
+def test_a_step_finer_than_the_pulse_resolution_sends_no_second_command():
+    """CI saw the café's last pose sent twice: a step of a few thousandths of a degree (or none, two
+    steps at one clock reading) encodes to the quarter microsecond just sent. Only new commands go
+    out; arming again sends the pose again whatever was sent before."""
+    link, clock = dry_link()
+    link.arm()
+    clock.sleep(0.1)
+    link.move_to({"shoulder": 3.0}, wait=False)  # reached in one step
+    sent = len(link.sent)
+    link.goal["shoulder"] = 3.0001  # 0.0006 us further: the same quarter microsecond
+    clock.sleep(0.1)
+    link.step()
+    link.step()  # no time passed
+    assert len(link.sent) == sent
+    assert link.commanded["shoulder"] == 3.0001
+    link.goal["shoulder"] = 4.0
+    clock.sleep(0.1)
+    link.step()
+    assert len(link.sent) == sent + 1
+    link.disarm()
+    link.arm()
+    assert len(link.sent) == sent + 1  # every joint's pulse is known: arming sends nothing
+    clock.sleep(0.1)
+    link.move_to({"shoulder": 4.0}, wait=False)
+    assert len(link.sent) == sent + 2  # a move after arming is always said
+
+
 def test_link_loss_disarms_and_reconnects_when_the_port_comes_back(tmp_path):
     stable = tmp_path / "servo0"
     emu, port = start_emulator("maestro", link=stable)

@@ -108,6 +108,7 @@ class ServoLink:
         self.goal: dict[str, float] = {}
         self.notes: list[str] = []  # what the last `move_to` had to clamp
         self._commanded_at = 0.0
+        self._last_move: bytes | None = None  # the last move command sent since arming
         self._serial: serial.SerialBase | None = None
         self.reconnect_every = reconnect_every
         self._last_attempt = -math.inf
@@ -254,6 +255,7 @@ class ServoLink:
             self.commanded = {**known, **home}
             self.goal = {}
             self._commanded_at = self.clock()
+            self._last_move = None
             self._send_pose(home)
             self.armed = True
             return dict(self.commanded)
@@ -292,7 +294,8 @@ class ServoLink:
             limited = rate_limit(self.joints, self.commanded, self.goal, dt)
             # Limits beat speed: a joint found outside its limits is brought back at once.
             pose, _ = clamp_pose(self.joints, limited)
-            self._send_pose(pose)
+            # A step shorter than the controller's pulse resolution says nothing new: not sent.
+            self._send_pose(pose, again=False)
             self.commanded.update(pose)
             self._commanded_at = now
             return pose
@@ -321,7 +324,8 @@ class ServoLink:
             self.step()
         return {n: self.commanded[n] for n in self.goal}
 
-    def _send_pose(self, pose: Mapping[str, float]) -> None:
+    def _send_pose(self, pose: Mapping[str, float], *, again: bool = True) -> None:
+        """Send `pose`; with `again` False, not when its command is the last one sent."""
         moves = [
             Move(
                 self.joints[n].channel,
@@ -330,8 +334,12 @@ class ServoLink:
             )
             for n, a in pose.items()
         ]
-        if moves:
-            self._send(self.protocol.move(moves))
+        if not moves:
+            return
+        command = self.protocol.move(moves)
+        if again or command != self._last_move:
+            self._send(command)
+            self._last_move = command
 
     # -- reading ----------------------------------------------------------------------------
 
