@@ -23,8 +23,9 @@ is printed apart. So is the compute per window (the sound's network and the rest
 engine's work on that window), which a live wearable adds on top: by the wall clock (more on a
 busy machine) and by the CPU the engine's thread used.
 
-Options that measure what a change would do without changing Servant: `--arrive-alone P` names
-a place arriving on one window alone when that window gives it at least P (no two in a row);
+Options that measure what a change would do without changing Servant: `--arrive-alone P` sets
+the probability at which one sound window alone names a place arriving (the decision pipeline's
+`arrive_sure`; `none`: only two windows in a row, the rule before issue 37's change);
 `--confirm-window S` (the Settings' confirm window) changes how far back the pictures count.
 Wrong moves are counted too, so that a faster rule's cost shows beside its gain: a taught pose
 sent at an untaught place before the switch, and after it a pose neither the place's nor the
@@ -52,7 +53,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.common import shared_data  # noqa: E402
+from bench.common import add_arrive_sure, shared_data  # noqa: E402
 from bench.wearer_day import (  # noqa: E402
     WINDOW_S,
     Data,
@@ -148,12 +149,9 @@ class Steadying:
     """The engine's `steady_open`, watched while `watching()`: what each window alone names is
     noted with the engine's time (`alone`), from its probabilities and the recogniser's own
     answer for it (unknown though its probabilities name a place: far from every taught
-    window). With `arrive_alone` P, a place that two windows in a row do not name is named all
-    the same when this window alone names it and gives it at least P (the change measured;
-    None: the engine's rule, unchanged)."""
+    window). The engine's decision is left as `steady_open` makes it."""
 
-    def __init__(self, recogniser: Any, arrive_alone: float | None) -> None:
-        self.arrive_alone = arrive_alone
+    def __init__(self, recogniser: Any) -> None:
         self.alone: list[tuple[float, str | None]] = []
         self.answered = UNKNOWN  # the recogniser's answer for the window being judged
         answers = recogniser.answers
@@ -172,15 +170,12 @@ class Steadying:
         previous: dict[str, float],
         far: bool,
         named_before: str | None = None,
+        **sure: Any,
     ) -> tuple[str | None, dict[str, float]]:
         far_alone = self.answered == UNKNOWN and sum(window.values()) > 0.5
-        alone, held_alone = elsewhere.steady_open(window, window, far_alone, None)
+        alone, _ = elsewhere.steady_open(window, window, far_alone, None)
         self.alone.append((clock(), alone))
-        named, held = elsewhere.steady_open(window, previous, far, named_before)
-        sure = self.arrive_alone
-        if named is None and alone is not None and sure is not None and window[alone] >= sure:
-            return alone, held_alone
-        return named, held
+        return elsewhere.steady_open(window, previous, far, named_before, **sure)
 
     @contextlib.contextmanager
     def watching(self, clock: ManualClock) -> Iterator[None]:
@@ -228,6 +223,7 @@ class Draw:
         self.places = sorted(rng.choice(data.both, places, replace=False).tolist())
         self.poses = poses_for(self.places, rng)
         self.confirm = args.confirm_window
+        self.arrive_sure = args.arrive_alone
         X, y, pictures, labels = [], [], [], []
         self.later: dict[str, np.ndarray] = {}
         self.later_pictures: dict[str, list[np.ndarray]] = {}
@@ -247,7 +243,7 @@ class Draw:
             self.later_pictures[place] = [read_picture(p) for p in paths[TAUGHT_PICTURES:][:8]]
         self.audio = make_recogniser("audio", FRESH_METHODS["audio"])
         self.audio.fit(self.audio.featurize(np.concatenate(X)), y)
-        self.steadying = Steadying(self.audio, args.arrive_alone)
+        self.steadying = Steadying(self.audio)
         self.visual = make_recogniser("image", FRESH_METHODS["image"])
         self.visual.fit(self.visual.featurize(pictures), labels)
         self.untaught = [
@@ -295,6 +291,7 @@ class Draw:
             confidence_threshold=Settings().confidence_threshold,
             smoother=steady(),
         )
+        engine.decisions.arrive_sure = self.arrive_sure
         link = RecordingLink(clock)
         engine.set_arm(link)
         engine.set_action_learner(lambda scene, scores, confidence: {"place": scene})
@@ -425,13 +422,7 @@ def main() -> int:
     parser.add_argument(
         "--after", type=float, default=40.0, help="seconds at the place after (default: 40)"
     )
-    parser.add_argument(
-        "--arrive-alone",
-        type=float,
-        metavar="P",
-        help="measure a change: a place is named arriving on one window alone when it gives the "
-        "place at least P (0 to 1; 0: any window that names it)",
-    )
+    add_arrive_sure(parser)
     parser.add_argument(
         "--confirm-window",
         type=float,
@@ -458,7 +449,7 @@ def main() -> int:
         f"{args.trials} switches after about {args.before:g} s elsewhere; confirm window "
         f"{args.confirm_window:g} s"
         + (
-            ""
+            "; a place named on two windows in a row only"
             if args.arrive_alone is None
             else f"; a place named on one window that gives it {args.arrive_alone:g} or more"
         )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import os
 import shutil
@@ -78,3 +79,28 @@ def tmux_pid(session: str) -> int:
         check=True,
     )
     return int(answer.stdout)
+
+
+def add_arrive_sure(parser: argparse.ArgumentParser, several: bool = False) -> None:
+    """`--arrive-alone P`: the probability at which one sound window alone names a place arriving
+    (the decision pipeline's `arrive_sure`, default Servant's); `none`: two windows in a row.
+    `several`: a list of them, each walked in turn (a list, also by default)."""
+    from servant_core.fusion.pipeline import ARRIVE_SURE
+
+    def probability(text: str) -> float | None:
+        if text.lower() == "none":
+            return None
+        value = float(text)
+        if not 0.5 <= value <= 1.0:
+            raise argparse.ArgumentTypeError("give a probability from 0.5 to 1, or none")
+        return value
+
+    parser.add_argument(
+        "--arrive-alone",
+        type=probability,
+        nargs="+" if several else None,
+        default=[ARRIVE_SURE] if several else ARRIVE_SURE,
+        metavar="P",
+        help="one sound window alone names a place arriving when it gives it P or more "
+        "(0.5 to 1; none: two windows in a row only; default: Servant's, %(default)s)",
+    )

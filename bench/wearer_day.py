@@ -60,7 +60,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.common import shared_data  # noqa: E402
+from bench.common import add_arrive_sure, shared_data  # noqa: E402
 from servant_core.audio import read_audio  # noqa: E402
 from servant_core.capture.replay import Clip, PacedAudio  # noqa: E402
 from servant_core.capture.source import ManualClock  # noqa: E402
@@ -69,6 +69,7 @@ from servant_core.engine.core import Engine  # noqa: E402
 from servant_core.engine.factories import live_policy, steady  # noqa: E402
 from servant_core.errors import ServantError  # noqa: E402
 from servant_core.events import UnknownScene  # noqa: E402
+from servant_core.fusion.pipeline import ARRIVE_SURE  # noqa: E402
 from servant_core.fusion.sequential import FusionConfig  # noqa: E402
 from servant_core.library import TEACH_WINDOWS, read_picture  # noqa: E402
 from servant_core.recognisers import FRESH_METHODS, make_recogniser  # noqa: E402
@@ -279,12 +280,14 @@ def walk(
     audio_method: str = FRESH_METHODS["audio"],
     accept_cosine: float | None = None,
     calibrated: bool = False,
+    arrive_sure: float | None = ARRIVE_SURE,
 ) -> dict[str, Any]:
     """Teach, then walk through the engine; what happened in each stay. `answering`: the wearer
     answers "What is this place?" (`--answers`); `threshold`: the arm's confidence threshold in
     percent (None: the user's default); `audio_method`: the sound's recogniser;
     `accept_cosine`: a fixed nearest-taught-window cosine (None: the method's own);
-    `calibrated`: each place's acceptance calibrated by the background instead."""
+    `calibrated`: each place's acceptance calibrated by the background instead; `arrive_sure`:
+    the probability at which one sound window alone names a place arriving (None: never)."""
     audio = make_recogniser("audio", audio_method)
     if accept_cosine is not None:  # another fixed acceptance than the method's
         audio.accept_cosine = accept_cosine
@@ -312,6 +315,7 @@ def walk(
         confidence_threshold=user.confidence_threshold if threshold is None else threshold,
         smoother=steady(),
     )
+    engine.decisions.arrive_sure = arrive_sure
     link = RecordingLink(clock)
     engine.set_arm(link)  # the stand-in link (see the module docstring)
     # a pose for each taught place; a place only labelled has none, as in the app
@@ -454,6 +458,25 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def report(result: dict[str, Any], answers: bool) -> None:
+    """Print one library size's figures (`summarise`'s)."""
+    for kind, share in sorted(result["shares"].items()):
+        print(
+            f"  {kind:<28} windows {share['windows']:>5}  right {share['right']:.3f}  "
+            f"wrong {share['wrong']:.3f}  none {share['none']:.3f}  "
+            f"asked in {result['asked'][kind]:.2f} of stays "
+            f"({result['asked_late'][kind]:.2f} after their first 10 s)"
+            + (f", answered {result['answered'].get(kind, 0)}" if answers else "")
+        )
+    print(
+        f"  wrong moves per hour of walking {result['wrong_moves_per_hour']:.1f}; first right "
+        f"move in a taught stay after {result['first_right_median_s'] or float('nan'):.1f} s "
+        f"(median), within 10 s in {result['first_right_within_10s'] or 0.0:.2f} of them, "
+        f"{result['taught_stays_without_a_right_move']} taught stays with none; right "
+        f"moves in taught stays after their first 10 s: {result['right_after_10s']:.3f}"
+    )
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=shared_data())
@@ -501,6 +524,7 @@ def main() -> int:
         action="store_true",
         help="birdnet: each place's acceptance from the background instead of the fixed cosine",
     )
+    add_arrive_sure(parser, several=True)
     parser.add_argument(
         "--answers",
         action="store_true",
@@ -519,47 +543,42 @@ def main() -> int:
         f"sound: {', '.join(data.both)}; {args.draws} draws a size, {args.shots} windows and "
         f"{args.pictures} pictures a place, stays of {args.stay:g} s, sound by {args.audio_method}"
         + ("" if args.half is None else f", sources of half {args.half} only")
+        + "; one window alone names a place at "
+        + ", ".join(str(p or "never") for p in args.arrive_alone)
     )
     figures = {}
-    for size in [int(s) for s in args.sizes.split(",")]:
-        why = cannot_draw(data, size, args.pictures)
-        if why:
-            print(f"{size} places taught: left out, {why}")
-            continue
-        runs = []
-        for draw in range(args.draws):
-            plan = plan_walk(data, size, args, np.random.default_rng([size, draw]))
-            with library_noise_silenced():
-                runs.append(
-                    walk(
-                        plan,
-                        rate,
-                        args.answers,
-                        args.threshold,
-                        args.audio_method,
-                        args.accept_cosine,
-                        args.calibrated_accept,
+    for sure in args.arrive_alone:
+        if len(args.arrive_alone) > 1:
+            print(f"one window alone names a place at {sure or 'never'}:")
+        for size in [int(s) for s in args.sizes.split(",")]:
+            why = cannot_draw(data, size, args.pictures)
+            if why:
+                print(f"{size} places taught: left out, {why}")
+                continue
+            runs = []
+            for draw in range(args.draws):
+                plan = plan_walk(data, size, args, np.random.default_rng([size, draw]))
+                with library_noise_silenced():
+                    runs.append(
+                        walk(
+                            plan,
+                            rate,
+                            args.answers,
+                            args.threshold,
+                            args.audio_method,
+                            args.accept_cosine,
+                            args.calibrated_accept,
+                            sure,
+                        )
                     )
-                )
-            print(f"  {size} places, draw {draw}: {', '.join(plan['taught'])}", flush=True)
-        result = summarise(runs)
-        figures[size] = {**result, "runs": runs}
-        print(f"{size} places taught ({time.time() - start:.0f} s so far):")
-        for kind, share in sorted(result["shares"].items()):
-            print(
-                f"  {kind:<28} windows {share['windows']:>5}  right {share['right']:.3f}  "
-                f"wrong {share['wrong']:.3f}  none {share['none']:.3f}  "
-                f"asked in {result['asked'][kind]:.2f} of stays "
-                f"({result['asked_late'][kind]:.2f} after their first 10 s)"
-                + (f", answered {result['answered'].get(kind, 0)}" if args.answers else "")
-            )
-        print(
-            f"  wrong moves per hour of walking {result['wrong_moves_per_hour']:.1f}; first right "
-            f"move in a taught stay after {result['first_right_median_s'] or float('nan'):.1f} s "
-            f"(median), within 10 s in {result['first_right_within_10s'] or 0.0:.2f} of them, "
-            f"{result['taught_stays_without_a_right_move']} taught stays with none; right "
-            f"moves in taught stays after their first 10 s: {result['right_after_10s']:.3f}"
-        )
+                print(f"  {size} places, draw {draw}: {', '.join(plan['taught'])}", flush=True)
+            result = summarise(runs)
+            figures[size if len(args.arrive_alone) == 1 else f"{size}@{sure}"] = {
+                **result,
+                "runs": runs,
+            }
+            print(f"{size} places taught ({time.time() - start:.0f} s so far):")
+            report(result, args.answers)
     if args.json:
         args.json.write_text(json.dumps(figures, indent=2))
     return 0

@@ -111,6 +111,18 @@ def test_a_place_is_named_only_when_two_windows_in_a_row_say_so() -> None:
     assert steady_open(cafe, cafe, far=True)[0] is None  # far from every place taught
 
 
+def test_one_window_alone_names_a_place_only_where_it_is_sure_and_not_far() -> None:
+    cafe, site = {"cafe": 0.9, "street": 0.05}, {"cafe": 0.1, "street": 0.05}
+    named, held = steady_open(cafe, site, far=False, sure_alone=0.85)
+    assert named == "cafe" and held == cafe  # arriving sure: this window's own probabilities
+    assert steady_open(cafe, site, far=False, sure_alone=0.95)[0] is None  # not sure enough
+    assert steady_open(cafe, {}, far=False, sure_alone=0.85, far_alone=True)[0] is None
+    assert steady_open(cafe, cafe, far=True, sure_alone=0.5)[0] is None  # two far: never
+    # two windows in a row still name the place they share, whatever this one alone says
+    named, held = steady_open(cafe, {"cafe": 0.7}, far=False, sure_alone=0.95)
+    assert named == "cafe" and held == {"cafe": 0.7, "street": 0.0}
+
+
 def test_a_place_named_stays_through_one_odd_window_but_not_through_another_place() -> None:
     here, odd = {"cafe": 0.9, "street": 0.05}, {"cafe": 0.3, "street": 0.1}
     # arriving: the odd window and the one after it name nothing (two in a row are needed)

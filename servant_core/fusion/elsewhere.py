@@ -125,6 +125,8 @@ def steady_open(
     previous: Mapping[str, float],
     far: bool,
     named_before: str | None = None,
+    sure_alone: float | None = None,
+    far_alone: bool = False,
 ) -> tuple[str | None, dict[str, float]]:
     """What a sense that knows somewhere else says of a window, held steady (pure).
 
@@ -137,6 +139,9 @@ def steady_open(
       odd window at a place the wearer is in (a door, a voice close by) does not unname it for
       two windows (on bench/wearer_day.py, taught places' right moves 0.838 → 0.86 with five
       places: docs/research.md, issue 21). Its held probability is that average.
+    - Arriving sure: where two windows do not name a place, this window alone names its likeliest
+      place when it gives it `sure_alone` or more and is not `far_alone` from every taught place
+      (None: never). The wearer's arm moves one window sooner where the sound is sure.
 
     Returns (the place, or None where somewhere else keeps half the probability or more, or the
     window is `far` from every taught place; the held probabilities)."""
@@ -145,6 +150,9 @@ def steady_open(
         return None, scores
     if named_before in window and max(window, key=lambda s: window[s]) == named_before:
         scores[named_before] = (window[named_before] + previous.get(named_before, 0.0)) / 2
-    if elsewhere_mass(scores) >= 0.5:
-        return None, scores
-    return max(scores, key=lambda s: scores[s]), scores
+    if elsewhere_mass(scores) < 0.5:
+        return max(scores, key=lambda s: scores[s]), scores
+    likeliest = max(window, key=lambda s: window[s])
+    if sure_alone is not None and not far_alone and window[likeliest] >= sure_alone:
+        return likeliest, dict(window)
+    return None, scores

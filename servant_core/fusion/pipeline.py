@@ -23,6 +23,11 @@ Said = tuple[str, float, dict[str, float] | None]
 
 ROLE_OF = {sense: SENSES[sense].role for sense in ("audio", "image")}  # what every policy hears
 
+ARRIVE_SURE = 0.8
+"""A sound window alone names a place it gives this probability or more (`steady_open`'s
+`sure_alone`): chosen on one half of the sources' walk, walked on the other (docs/research.md,
+issue 37); two windows in a row name any place likelier than not."""
+
 
 class DecisionPipeline:
     """From opinions to decision events, in four steps a caller drives in this order:
@@ -42,8 +47,10 @@ class DecisionPipeline:
         policy: Any,
         smoother: SceneSmoother | None = None,
         roles: Iterable[str] = ROLE_OF.values(),
+        arrive_sure: float | None = ARRIVE_SURE,
     ) -> None:
         self.policy = policy
+        self.arrive_sure = arrive_sure
         self.smoother = smoother
         self.scores: dict[str, dict[str, float]] = {role: {} for role in roles}
         self.open_roles: set[str] = set()  # roles whose probabilities know somewhere else
@@ -63,14 +70,20 @@ class DecisionPipeline:
         """A sound window's (scene or UNKNOWN, confidence, scores), held steady.
 
         Open (`open_`): unknown though its probabilities name a place is far from every place
-        taught; held steady as the probabilities are, two far windows in a row, not one odd one
-        (`steady_open`). Shares in percent go through the smoother when there is one."""
+        taught; held steady as the probabilities are, two far windows in a row, not one odd one,
+        or one window alone where it is sure (`steady_open`, `arrive_sure`). Shares in percent
+        go through the smoother when there is one."""
         if open_:
             far = scene == UNKNOWN and sum(scores.values()) > 0.5
             previous, self._previous = self._previous, scores
             far_before, self._previous_far = self._previous_far, far
             named, held = steady_open(
-                scores, previous or {}, far and far_before, self._named_before
+                scores,
+                previous or {},
+                far and far_before,
+                self._named_before,
+                sure_alone=self.arrive_sure,
+                far_alone=far,
             )
             self._named_before = named
             return (UNKNOWN, 0.0, held) if named is None else (named, 100.0 * held[named], held)
