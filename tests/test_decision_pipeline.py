@@ -67,15 +67,15 @@ def engine_decision(policy, config, sound, open_sound) -> Decision | None:
     engine.subscribe(lambda e: decisions.append(e) if isinstance(e, Decision) else None)
     engine._arm.act = lambda *args: None  # no arm here: the decision is what is compared
     window = np.random.default_rng(0).normal(0, 0.1, RATE * 5).astype(np.float32)
-    engine._on_window(window, RATE)
+    engine._judge.on_window(window, RATE)
     clock.advance(5.0)
-    engine._on_window(window, RATE)
+    engine._judge.on_window(window, RATE)
     step = config.picture_interval_s / 4
     while not decisions and clock() < config.acoustic_window_s + 10:
         t = clock.advance(step)
-        engine._handle(engine.decisions.tick(t))
+        engine._judge.handle(engine.decisions.tick(t))
         if not decisions and engine.decisions.wants_picture(t):
-            engine._on_picture(np.zeros((8, 8, 3), np.uint8), t)
+            engine._judge.on_picture(np.zeros((8, 8, 3), np.uint8), t)
     return decisions[0] if decisions else None
 
 

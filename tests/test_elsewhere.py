@@ -356,12 +356,12 @@ def test_a_decision_from_pictures_alone_is_none_where_the_sound_says_elsewhere()
     from_pictures = Decision(10.0, "cafe", 90.0, "CafeScene detected", leaned_on=("image",))
     engine.decisions.note("acoustic", {"cafe": 0.03, "street": 0.02}, True)
     engine.decisions.note("visual", pictures, False)
-    engine._handle([from_pictures])
+    engine._judge.handle([from_pictures])
     [none] = [e for e in events if isinstance(e, Decision)]
     assert none.scene is None and none.line == "No scene detected" and none.leaned_on == ("image",)
     assert moves == []
     engine.decisions.note("acoustic", {"cafe": 0.8, "street": 0.05}, True)
-    engine._handle([from_pictures])
+    engine._judge.handle([from_pictures])
     cafe = [e for e in events if isinstance(e, Decision)][-1]
     # by hand: cafe 0.8·(2·0.9) = 1.44, street 0.05·(2·0.1) = 0.01, elsewhere 0.15 → 1.44 / 1.6
     assert cafe.scene == "cafe" and cafe.not_elsewhere and moves == ["cafe"]

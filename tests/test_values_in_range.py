@@ -123,7 +123,9 @@ def test_live_unusable_windows_are_one_notice_then_quiet_until_a_good_one() -> N
     huge = np.full_like(windows[0], 1e30)  # finite float32, but its features overflow
 
     def window(rows: np.ndarray) -> None:
-        engine._guarded("motion prediction", engine._on_samples, "motion", rows, model.rate)
+        engine._judge.guarded(
+            "motion prediction", engine._judge.on_samples, "motion", rows, model.rate
+        )
 
     for _ in range(5):
         window(huge)

@@ -1,6 +1,9 @@
-"""The engine, split by role: `core` (the `Engine`: life cycle, judging windows and pictures,
-fusion), `bus` (events), `loop` (the devices side of the sense loop), `learning` (retrain,
-fold-in, saving), `arm` (the link and the poses) and `factories` (the demo's and the live engine).
+"""The engine, split by role: `core` (the `Engine`: its life cycle, coordinating the parts),
+`bus` (events), `sense_devices` and `loop` (the devices side of the sense loop), `judging`
+(windows and pictures to predictions, decisions and the arm), `unknown_places` ("What is this
+place?" and its label), `models` and `learning` (the recognisers; retrain, fold-in, saving),
+`arm` (the link and the poses), `fusion_settings` (the user's fusion windows) and `factories`
+(the demo's and the live engine).
 
 Front ends import from here.
 """
@@ -8,7 +11,7 @@ Front ends import from here.
 from servant_core.capture.source import ManualClock, MonotonicClock
 from servant_core.engine.arm import NO_POSE, Pose, PoseFor
 from servant_core.engine.bus import Subscriber
-from servant_core.engine.core import NO_MODEL, Engine, _predict, decision_unit, fusion_config
+from servant_core.engine.core import NO_MODEL, Engine
 from servant_core.engine.factories import (
     LiveSettings,
     build_demo_engine,
@@ -16,6 +19,8 @@ from servant_core.engine.factories import (
     pose_for_taught,
     steady,
 )
+from servant_core.engine.fusion_settings import fusion_config
+from servant_core.engine.judging import _predict, decision_unit
 from servant_core.engine.learning import UNKNOWN_KEPT
 from servant_core.engine.loop import RING_SECONDS, SPECTRUM_FPS, SPECTRUM_SIZE, spectrum_db
 from servant_core.recognisers import FRESH_METHODS

@@ -15,7 +15,8 @@ from typing import Any
 
 from servant_core.capture.source import ManualClock, MonotonicClock
 from servant_core.engine.arm import Pose, PoseFor
-from servant_core.engine.core import Engine, fusion_config
+from servant_core.engine.core import Engine
+from servant_core.engine.fusion_settings import fusion_config
 from servant_core.engine.loop import DeviceMakers
 from servant_core.errors import ServantError
 from servant_core.events import Notice

@@ -1,9 +1,9 @@
 """The learning part of the engine: refitting on a library, keeping unknowns, folding in a label,
 and saving the result.
 
-These are the pieces; `Engine.retrain` and `Engine.label_unknown` hold the locks and swap the new
-recognisers in. Every update is made on a copy, so the sense thread, which may be predicting with
-the old recogniser right now, never sees half of one.
+These are the pieces; `models.Models` holds the locks and swaps the new recognisers in (and
+`unknown_places.UnknownPlaces` keeps the unknowns). Every update is made on a copy, so the
+sense thread, which may be predicting with the old recogniser right now, never sees half of one.
 """
 
 from __future__ import annotations
