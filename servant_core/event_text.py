@@ -15,12 +15,18 @@ from typing import Any
 from servant_core.place_names import printable_name
 
 UNKNOWN_PLACE = "an unknown place"
+SILENCE = "silence"  # what a silent window is heard as: no place, and not an unknown one
 
 
 def place(scene: str | None) -> str:
     """A predicted scene in words: its name, or "an unknown place" (None, the open set). A name
     from a folder made by hand may hold a newline: it is shown escaped, on the line."""
     return printable_name(scene) if scene else UNKNOWN_PLACE
+
+
+def left_text(scene: str, silent: bool) -> str:
+    """Why a place decided is no longer: "coffee no longer heard: silence" (`log_news.News`)."""
+    return f"{place(scene)} no longer heard: {SILENCE if silent else UNKNOWN_PLACE}"
 
 
 def confidence_text(confidence: float, unit: str | None, width: int = 0) -> str:

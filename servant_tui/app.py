@@ -13,7 +13,7 @@ from textual.binding import Binding
 from textual.screen import Screen
 from textual.worker import Worker, WorkerState
 
-from servant_core.event_text import arm_text, confidence_text, place
+from servant_core.event_text import SILENCE, arm_text, confidence_text, left_text, place
 from servant_core.events import (
     AcousticPrediction,
     ArmState,
@@ -27,6 +27,8 @@ from servant_core.events import (
     UnknownScene,
     VisualPrediction,
 )
+from servant_core.fusion.sequential import scene_line
+from servant_core.log_news import LogNews
 from servant_core.storage import data_dir
 from servant_tui.heap import release_free_heap
 from servant_tui.messages import (
@@ -155,6 +157,7 @@ class ServantApp(App[None]):
         self._deferred = False  # an unknown place was met behind another screen, and logged
         self._named_since: float | None = None  # since when the sense asked about names a place
         self._noticed: set[str] = set()
+        self.news = LogNews()  # which events the log says, as `servant run --headless` does
         engine.subscribe(self._from_engine)
 
     @property
@@ -244,16 +247,17 @@ class ServantApp(App[None]):
             self.arm_state = event
             if changed:
                 self.refresh_bindings()
-                self.log_line(event.t, self._arm_line(event))
-            if event.pose_of is not None:
-                self.log_line(event.t, escape(arm_text(event)))
         elif isinstance(event, (AcousticPrediction, VisualPrediction)) and event.scene:
             self.seen_scenes.add(event.scene)
             if isinstance(event, AcousticPrediction):
                 self._deferred = False  # the next unknown place met behind a screen is logged
-        line = self._log_text(event)
+        news = self.news(event)
+        line = self._log_text(event, news.silent) if news.said else None
         if line:
             self.log_line(event.t, line)
+        if news.left is not None:
+            why = escape(left_text(news.left, news.silent))
+            self.log_line(event.t, f"[yellow]{escape(scene_line(None))} [/]({why})")
         if isinstance(event, ErrorEvent):
             self.notify(event.message, title="Servant", severity="error")
         elif isinstance(event, Notice) and event.message not in self._noticed:
@@ -271,7 +275,14 @@ class ServantApp(App[None]):
         return [s for s in self.screen_stack if hasattr(s, "show_event")]
 
     @staticmethod
-    def _log_text(event: Any) -> str | None:
+    def _log_text(event: Any, silent: bool = False) -> str | None:
+        """The log's line for an event; `silent`: the event is the sound of a silent window."""
+        if isinstance(event, ArmState):
+            if event.pose_of is not None:
+                return escape(arm_text(event))
+            if not event.connected:
+                return "[red]arm not connected[/]"
+            return "[bold red]arm ARMED[/]" if event.armed else "arm disarmed"
         if isinstance(event, Decision):
             leaned = leaned_text(event)
             because = f"; {leaned}" if leaned else ""
@@ -284,7 +295,7 @@ class ServantApp(App[None]):
         if isinstance(event, (AcousticPrediction, VisualPrediction)):
             verb = "hears" if isinstance(event, AcousticPrediction) else "sees"
             if event.scene is None:  # a confidence in no scene says nothing
-                return f"{verb} {place(None)}"
+                return f"{verb} {SILENCE if silent else place(None)}"
             confidence = log_confidence(event)
             return f"{verb} {escape(place(event.scene))} ({confidence})"
         if isinstance(event, SensePrediction):
@@ -300,12 +311,6 @@ class ServantApp(App[None]):
         if isinstance(event, Notice):
             return f"[cyan]{escape(event.message)}[/]"
         return None
-
-    @staticmethod
-    def _arm_line(state: ArmState) -> str:
-        if not state.connected:
-            return "[red]arm not connected[/]"
-        return "[bold red]arm ARMED[/]" if state.armed else "arm disarmed"
 
     def log_line(self, t: float | None, line: str) -> None:
         # the space ends the styled run: a reader trimming runs keeps the words apart

@@ -565,6 +565,31 @@ def test_the_arm_is_said_to_move_once_for_a_place_not_at_every_decision_there(re
     assert [e.pose_of for e in said] == ["coffee"]
 
 
+def cafe_sound(windows: int) -> np.ndarray:
+    """`windows` 5 s windows of the demo's coffee shop, the same every run."""
+    return np.concatenate(
+        [synth_window("coffee", np.random.default_rng([5, k])) for k in range(windows)]
+    )
+
+
+def heard_at_the_cafe(clips: list[Clip], clock: ManualClock, **options: Any) -> Engine:
+    """The engine on the demo's recognisers (Servant's own, in %) hearing `clips` at the demo's
+    rate on `clock`, with the coffee shop's pictures all along, by the parallel policy."""
+    acoustic, visual = train_demo_recognisers(seed=0, paper=False)
+    shots = iter(range(10**6))
+    return Engine(
+        audio=PacedAudio(clips, DEMO_RATE, realtime=False, clock=clock),
+        camera=ShowingCamera(
+            lambda: synth_picture("coffee", np.random.default_rng([6, next(shots)]))
+        ),
+        acoustic=acoustic,
+        visual=visual,
+        clock=clock,
+        fusion=ParallelFusion(),
+        **options,
+    )
+
+
 def test_silence_names_no_place_asks_nothing_and_never_moves_the_arm():
     """A muted microphone (exact zeros) under the camera of a taught place, armed: the engine
     names no place (a recogniser asked about silence may name one: a teach-mode model on real
@@ -576,26 +601,9 @@ def test_silence_names_no_place_asks_nothing_and_never_moves_the_arm():
     link = ServoLink.open(
         port, "maestro", default_joints(), clock=link_clock, sleep=link_clock.sleep
     )
-    acoustic, visual = train_demo_recognisers(seed=0, paper=False)  # Servant's own, in %
-    coffee = np.concatenate(
-        [synth_window("coffee", np.random.default_rng([5, k])) for k in range(8)]
-    )
     silence = np.zeros(DEMO_RATE * 60, dtype=np.float32)
-    audio = PacedAudio(
-        [Clip("silence", silence), Clip("coffee", coffee)], DEMO_RATE, realtime=False, clock=clock
-    )
-    shots = iter(range(10**6))  # the coffee shop's pictures all along
     try:
-        engine = Engine(
-            audio=audio,
-            camera=ShowingCamera(
-                lambda: synth_picture("coffee", np.random.default_rng([6, next(shots)]))
-            ),
-            acoustic=acoustic,
-            visual=visual,
-            clock=clock,
-            fusion=ParallelFusion(),
-        )
+        engine = heard_at_the_cafe([Clip("silence", silence), Clip("coffee", cafe_sound(8))], clock)
         events = collect(engine)
         engine.set_arm(link)
         engine.set_action_learner(lambda scene, scores, confidence: poses.get(scene))

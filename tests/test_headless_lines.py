@@ -1,6 +1,7 @@
 """What `servant run --headless` prints while the wearer stays somewhere (issue 39 items 3, 4, 7):
 a line when the decision, the arm's pose or the place's being unknown changes, not a line a
-window; and no command to the controller for a pose the arm already holds.
+window; a line when the place decided is left, and silence said as silence; and no command to
+the controller for a pose the arm already holds.
 
 The demo's engine walks its café for 30 s on a simulated clock; the arm is a real `ServoLink` to
 the project's servo-controller emulator on a pty, which counts the targets it receives.
@@ -10,19 +11,24 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
 import pytest
 
 from servant_core.actions.learner import ActionLearner
 from servant_core.actions.records import TeachRecord, label_scores
+from servant_core.capture.replay import Clip
+from servant_core.capture.source import ManualClock
 from servant_core.cli.live import _Printer
 from servant_core.demo.arm import POSES, demo_learner
+from servant_core.demo.audio_synth import DEMO_RATE
 from servant_core.demo.scenes import SCENES
-from servant_core.engine import build_demo_engine, pose_for_taught
-from servant_core.events import AcousticPrediction, UnknownScene
+from servant_core.engine import Engine, build_demo_engine, pose_for_taught, steady
+from servant_core.events import AcousticPrediction, Decision, UnknownScene
 from servant_core.servo.emulator import start_emulator
 from servant_core.settings import default_joints
 from servant_core.storage import data_dir
 from tests.conftest import servant
+from tests.test_engine import cafe_sound, heard_at_the_cafe
 from tests.test_live_path import expected_pulse
 
 
@@ -43,6 +49,15 @@ def cafe_walk(port: str, learner, seconds: float = 30.0) -> None:
     engine.arm()
     engine.run_until(seconds)
     engine.stop()
+
+
+def cafe_then_silence(seconds: float = 30.0) -> Engine:
+    """The live engine, smoothed, by the parallel policy: `seconds` of the café's sound, then as
+    long of silence (a muted microphone, digital zeros), the café's pictures all along, on a
+    simulated clock."""
+    silence = np.zeros(round(DEMO_RATE * seconds), dtype=np.float32)
+    clips = [Clip("coffee", cafe_sound(round(seconds / 5.0))), Clip("silence", silence)]
+    return heard_at_the_cafe(clips, ManualClock(), smoother=steady(), spectrum_fps=0)
 
 
 def printed(capsys) -> list[str]:
@@ -128,3 +143,50 @@ def test_the_demo_says_why_its_senses_disagree_on_the_street():
     disagree = next(i for i in said if "sound and sight disagree" in lines[i])
     no_scene = next(i for i, line in enumerate(lines) if "No scene detected" in line)
     assert disagree < no_scene, lines
+
+
+def test_leaving_a_taught_place_for_silence_is_said_once_and_silence_is_silence(capsys):
+    """Issue 39, the second walk: after the café, nothing said that it was no longer detected,
+    and a muted microphone was "heard an unknown place" at every window. Now `No scene detected`
+    once, saying why, and every silent window is heard as silence."""
+    engine = cafe_then_silence()
+    engine.subscribe(_Printer(False))
+    events: list = []
+    engine.subscribe(events.append)
+    engine.run_until(60.0)
+    engine.stop()
+    lines = printed(capsys)
+    decided = [e for e in events if isinstance(e, Decision) and e.scene == "coffee"]
+    assert len(decided) >= 2, "the engine decides the café again at every window it stays"
+    assert len([line for line in lines if "CoffeeScene detected" in line]) == 1, lines
+    left = [i for i, line in enumerate(lines) if "No scene detected" in line]
+    assert len(left) == 1, lines
+    assert lines[left[0]].endswith("No scene detected  (coffee no longer heard: silence)")
+    assert left[0] > next(i for i, line in enumerate(lines) if "CoffeeScene detected" in line)
+    assert len([line for line in lines if line.endswith("] heard silence")]) == 6, lines
+    assert not [line for line in lines if "heard an unknown place" in line], lines
+
+
+def test_leaving_a_taught_place_for_an_untaught_one_is_said_once(capsys):
+    """The place decided, then the sound names no taught place for a minute (the engine asks
+    about it from the sixth window): one `No scene detected`, when the sound stops naming the
+    café, and a decision of the café later is said again."""
+    printer = _Printer(False)
+    cafe = {"coffee": 0.9, "street": 0.05}
+    elsewhere = {"coffee": 0.1, "street": 0.2}
+    for t in (5.0, 10.0, 15.0):
+        printer(AcousticPrediction(t, "coffee", 90.0, cafe, "%"))
+        printer(Decision(t, "coffee", 90.0, "CoffeeScene detected", confidence_unit="%"))
+    for k in range(12):
+        t = 20.0 + 5.0 * k
+        printer(AcousticPrediction(t, None, 0.0, elsewhere, "%"))
+        if k >= 5:
+            printer(UnknownScene(t, "audio", "street", f"audio-{k}"))
+    printer(Decision(80.0, None, 0.0, "No scene detected"))  # a policy's own: said already
+    printer(AcousticPrediction(85.0, "coffee", 90.0, cafe, "%"))
+    printer(Decision(85.0, "coffee", 90.0, "CoffeeScene detected", confidence_unit="%"))
+    lines = printed(capsys)
+    left = [line for line in lines if "No scene detected" in line]
+    assert left == ["[  20.00] No scene detected  (coffee no longer heard: an unknown place)"]
+    assert len([line for line in lines if "CoffeeScene detected" in line]) == 2, lines
+    assert len([line for line in lines if "heard an unknown place" in line]) == 12, lines

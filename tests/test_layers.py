@@ -10,7 +10,7 @@ same layer are siblings and do not import each other. Bottom first:
    events, threads, progress, perceptron (a small net's forward pass)
 2. storage (atomic writes, the data folders)
 3. settings, place_names, pty_port, serial_port
-4. event_text
+4. event_text | log_news: the words front ends share for events; which events a log says
 5. features, audio (acoustic and visual vectors; reading and resampling sound)
 6. library (the scene library on disk: which files are recordings, pictures and sample logs)
 7. capture | servo: the device packages, the senses' sources and the arm's link; each opens
@@ -53,7 +53,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ),
     ("storage",),
     ("settings", "place_names", "pty_port", "serial_port"),
-    ("event_text",),
+    ("event_text", "log_news"),
     ("features", "audio"),
     ("library",),
     ("capture", "servo"),

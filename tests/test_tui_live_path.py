@@ -107,3 +107,26 @@ async def test_an_unknown_place_waits_for_the_live_screen_and_does_not_nag(tmp_p
             assert not isinstance(app.screen, LabelPrompt), t
         engine.emit(UnknownScene(400.0, "audio", None, "audio-9"))
         await settle(pilot, lambda: isinstance(app.screen, LabelPrompt))
+
+
+async def test_the_log_says_a_decision_once_and_silence_as_silence(tmp_path):
+    """The second walk: at a café the log said `CafeScene detected (…)` every 5 s, as headless
+    did before; with nothing playing into the microphone the Scene pane said `hears unknown
+    place`. The log now says the decision once and that it no longer holds once the microphone
+    is silent, as `servant run --headless` does; the Scene pane follows every window, and says
+    silence where there is silence."""
+    from tests.test_headless_lines import cafe_then_silence
+
+    engine = cafe_then_silence()
+    app = ServantApp(engine, library_root=tmp_path)
+    async with app.run_test(size=(100, 30)) as pilot:
+        scene = app.live.scene
+        await settle(pilot, lambda: log_text(app).count("hears silence") == 6, tries=3000)
+        rows = {str(label): str(text) for _, label, text in scene._rows()}
+        assert rows["hears"] == "silence", rows
+        log = log_text(app)
+        assert sum(d.scene == "coffee" for d in scene.decisions) >= 2  # each window's, shown
+        assert log.count("CoffeeScene detected") == 1, log
+        assert log.count("No scene detected") == 1, log
+        assert "No scene detected (coffee no longer heard: silence)" in log, log
+        assert "hears an unknown place" not in log, log

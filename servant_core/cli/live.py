@@ -309,54 +309,51 @@ def _printer(as_json: bool) -> Any:
 
 
 class _Lines:
-    """The lines of a headless run: `_event_line`, except that a state that holds is said when it
-    begins, not at every window it holds (the decided place, the arm standing still, an unknown
-    place). The first unknown place says what it is and how to teach it; a run at one place for
+    """The lines of a headless run: `_event_line`, for the events `log_news.LogNews` says are
+    news (a decision or the arm's state when it changes, not at every window it holds; a place
+    decided said to be left when the sound stops naming one), and an unknown place when it
+    begins. The first unknown place says what it is and how to teach it; a run at one place for
     an hour is a handful of lines, not thousands."""
 
     def __init__(self, library: Path | None = None) -> None:
+        from servant_core.log_news import LogNews
+
         self.library = library
-        self._decided: tuple[str | None, ...] = ()  # the last decision said: (scene,)
-        self._arm = ""  # the arm's last line, without its time
+        self.news = LogNews()
         self._unknown: set[str] = set()  # the senses whose unknown place was said and holds
         self._taught_how = False
         self._lock = threading.Lock()  # events come from the senses' and the arm's threads
 
     def __call__(self, event: Event) -> str | None:
-        from servant_core.event_text import arm_text
-        from servant_core.events import ArmState, Decision, UnknownScene
+        from servant_core.event_text import left_text
+        from servant_core.events import UnknownScene
+        from servant_core.fusion.sequential import scene_line
 
-        line = _event_line(event)
         with self._lock:
-            if line is None or not self._new(event):
+            news = self.news(event)
+            line = _event_line(event, silent=news.silent)
+            if line is None or not news.said or not self._new(event):
                 return None
-            if isinstance(event, Decision):
-                self._decided = (event.scene,)
-            elif isinstance(event, ArmState):
-                self._arm = arm_text(event)
-            elif isinstance(event, UnknownScene):
+            if isinstance(event, UnknownScene):
                 self._unknown.add(event.sense)
                 if not self._taught_how:
                     self._taught_how = True
                     return f"[{event.t:7.2f}] {self._how_to_teach(event)}"
+        if news.left is not None:
+            left = f"[{event.t:7.2f}] {scene_line(None)}  ({left_text(news.left, news.silent)})"
+            return f"{line}\n{left}"
         return line
 
     def _new(self, event: Event) -> bool:
-        """Whether `event` says something the lines have not said yet (under `_lock`)."""
-        from servant_core.event_text import arm_text
+        """Whether an unknown place's `event` says something the lines have not said yet (under
+        `_lock`): each sense's unknown place once, until that sense names a place again."""
         from servant_core.events import (
             AcousticPrediction,
-            ArmState,
-            Decision,
             SensePrediction,
             UnknownScene,
             VisualPrediction,
         )
 
-        if isinstance(event, Decision):
-            return self._decided != (event.scene,)
-        if isinstance(event, ArmState):
-            return event.pose_of is not None or arm_text(event) != self._arm
         if isinstance(event, UnknownScene):
             return event.sense not in self._unknown
         if isinstance(event, (AcousticPrediction, VisualPrediction, SensePrediction)):
@@ -388,9 +385,10 @@ def _sense_of(prediction: Any) -> str:
     return "image" if isinstance(prediction, VisualPrediction) else str(prediction.sense)
 
 
-def _event_line(event: Event) -> str | None:
-    """The line a person reads for an event, or None for events too frequent to print."""
-    from servant_core.event_text import arm_text, confidence_text, place
+def _event_line(event: Event, silent: bool = False) -> str | None:
+    """The line a person reads for an event, or None for events too frequent to print; `silent`:
+    the event is the sound of a silent window (`log_news.SilenceWatch`)."""
+    from servant_core.event_text import SILENCE, arm_text, confidence_text, place
     from servant_core.events import (
         AcousticPrediction,
         ArmState,
@@ -415,7 +413,7 @@ def _event_line(event: Event) -> str | None:
             ("heard", "acoustic") if isinstance(event, AcousticPrediction) else ("saw", "visual")
         )
         if event.scene is None:  # a confidence in no scene says nothing
-            return f"{at} {verb} {place(None)}"
+            return f"{at} {verb} {SILENCE if silent else place(None)}"
         return f"{at} {verb} {place(event.scene)}  {sense} confidence {confidence}"
     if isinstance(event, SensePrediction):
         if event.scene is None:

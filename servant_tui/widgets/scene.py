@@ -9,7 +9,7 @@ from rich.table import Table
 from rich.text import Text
 from textual.widgets import Static
 
-from servant_core.event_text import UNKNOWN_PLACE, confidence_text
+from servant_core.event_text import SILENCE, UNKNOWN_PLACE, confidence_text
 from servant_core.events import (
     AcousticPrediction,
     Decision,
@@ -18,6 +18,7 @@ from servant_core.events import (
     UnknownScene,
     VisualPrediction,
 )
+from servant_core.log_news import SilenceWatch
 from servant_core.senses import SAMPLE_SENSES
 from servant_tui.widgets.text import bar, clock
 
@@ -77,6 +78,8 @@ class ScenePane(Static):
         super().__init__(id=id)
         self.confirm_window_s = confirm_window_s
         self.heard: AcousticPrediction | None = None
+        self.silence = SilenceWatch()
+        self.heard_silence = False  # `heard` is of a silent window
         self.seen: VisualPrediction | None = None
         # a row for each sample sense in use, or heard from
         self.felt: dict[str, SensePrediction | None] = {
@@ -100,11 +103,13 @@ class ScenePane(Static):
         self.update(self._render_state(), layout=False)
 
     def show_event(self, event: object) -> None:
+        self.silence.see(event)
         if self.asked is not None and answers_question(event, self.asked.sense):
             self.asked = None
             self.deciding = True
         if isinstance(event, AcousticPrediction):
             self.heard = event
+            self.heard_silence = self.silence.silent
         elif isinstance(event, VisualPrediction):
             self.seen = event
         elif isinstance(event, SensePrediction):
@@ -151,7 +156,8 @@ class ScenePane(Static):
         rows: list[tuple[str, Text | str, Text | str]] = []
         senses = (("hears", self.heard), ("sees", self.seen), *self.felt.items())
         for name, prediction in senses:
-            rows.append(("sense", name, self._prediction_text(prediction)))
+            silent = name == "hears" and self.heard_silence
+            rows.append(("sense", name, self._prediction_text(prediction, silent)))
         rows.append(("fusion", "fusion", self._fusion_text()))
         rows.append(("window", "window", self._window_text()))
         pictures = self.fusion.pictures_taken if self.fusion else 0
@@ -192,11 +198,12 @@ class ScenePane(Static):
     @staticmethod
     def _prediction_text(
         prediction: AcousticPrediction | VisualPrediction | SensePrediction | None,
+        silent: bool = False,
     ) -> Text:
         if prediction is None:
             return Text("–", "grey50")
         if prediction.scene is None:  # a confidence in no scene says nothing
-            return Text("unknown place", "yellow")
+            return Text(SILENCE if silent else "unknown place", "yellow")
         scene = prediction.scene
         confidence = confidence_text(prediction.confidence, prediction.confidence_unit, width=5)
         pad = max(len(scene) + 1, PREDICTION_WIDTH - len(confidence))

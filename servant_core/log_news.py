@@ -1,0 +1,96 @@
+"""Which of the engine's events a log says, for every front end: `servant run --headless`'s
+lines and the TUI's log both ask a `LogNews`, so that they cannot disagree.
+
+A state that holds is said when it begins, not at every window it holds: the parallel policy
+decides again at every window the wearer stays (`CoffeeScene detected` every 5 s), and the arm
+reports its state after every pose it is asked to hold. What the events leave unsaid is said too:
+
+- the place decided is left when the sound stops naming a place (somewhere untaught, silence):
+  no policy decides then, and none says so either; the log says `No scene detected` once;
+- a silent window is silence, not an unknown place (`SilenceWatch`).
+
+How each front end words an event is its own (`event_text` holds the words they share); what
+each sense makes of each window is news at every window.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from servant_core.events import AcousticPrediction, ArmState, Decision, Notice
+
+SILENCE_NOTICE = "microphone: silence"
+"""How the engine's notice of a run of silent windows begins (`Engine._on_silence`)."""
+
+
+class SilenceWatch:
+    """Whether the sound's latest window was silence (`silent`), from the events alone.
+
+    The engine says so once, at the first silent window of a run (a `Notice`), then gives each
+    silent window an `AcousticPrediction` of no place with no share for any (no recogniser is
+    asked about silence). A prediction naming a place or giving one a share ends the run. The
+    events carry no mark of silence, so the first window with sound after silence reads as
+    silence too when it is unsure of every place (its held shares are all zero then)."""
+
+    def __init__(self) -> None:
+        self.silent = False
+
+    def see(self, event: Any) -> None:
+        if isinstance(event, Notice) and event.message.startswith(SILENCE_NOTICE):
+            self.silent = True
+        elif isinstance(event, AcousticPrediction) and (
+            event.scene is not None or any(event.scores.values())
+        ):
+            self.silent = False
+
+
+@dataclass(frozen=True)
+class News:
+    """What a log says for one event."""
+
+    said: bool  # the event's own line
+    silent: bool = False  # the event is the sound's prediction of a silent window
+    left: str | None = None  # the place decided that the sound no longer names: said once
+
+
+class LogNews:
+    """Call it with each event, in order, from one thread at a time: the `News` of the event.
+
+    - a `Decision` is said when its place differs from the last one said (a first decision,
+      `No scene detected` too, is said);
+    - an `ArmState` when the arm has moved to a place's pose, or is connected, lost, armed or
+      disarmed since the last one said; not when it holds;
+    - an `AcousticPrediction` of no place right after one of a place, while a place is decided,
+      also says that place `left`; that counts as the decision none (a policy's own
+      `No scene detected` after it is not said again);
+    - every other event is said."""
+
+    def __init__(self) -> None:
+        self.silence = SilenceWatch()
+        self._decided: tuple[str | None, ...] = ()  # the last decision said: (scene,)
+        self._heard: str | None = None  # the place the sound's last window named
+        self._arm: tuple[bool, bool] | None = None  # (connected, armed) last said
+
+    def __call__(self, event: Any) -> News:
+        self.silence.see(event)
+        if isinstance(event, Decision):
+            if self._decided == (event.scene,):
+                return News(False)
+            self._decided = (event.scene,)
+            return News(True)
+        if isinstance(event, ArmState):
+            state = (event.connected, event.armed)
+            if event.pose_of is None and state == self._arm:
+                return News(False)
+            self._arm = state
+            return News(True)
+        if isinstance(event, AcousticPrediction):
+            before, self._heard = self._heard, event.scene
+            silent = event.scene is None and self.silence.silent
+            decided = self._decided[0] if self._decided else None
+            if event.scene is None and before is not None and decided is not None:
+                self._decided = (None,)
+                return News(True, silent, decided)
+            return News(True, silent)
+        return News(True)
