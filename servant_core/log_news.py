@@ -21,7 +21,7 @@ from typing import Any
 from servant_core.events import AcousticPrediction, ArmState, Decision, Notice
 
 SILENCE_NOTICE = "microphone: silence"
-"""How the engine's notice of a run of silent windows begins (`Engine._on_silence`)."""
+"""How the engine's notice of silent windows begins (`engine.judging.Judge._on_silence`)."""
 
 
 class SilenceWatch:
