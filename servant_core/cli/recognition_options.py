@@ -1,6 +1,6 @@
 """The options of `servant train | predict | eval | table`; the commands themselves are in
-`servant_core.cli.recognition`, imported only when one runs: this module loads no library, so
-that each command's `--help` answers at once."""
+`servant_core.cli.train`, `.predict` and `.evaluation`, each imported only when one of its
+commands runs: this module loads no library, so that each command's `--help` answers at once."""
 
 from __future__ import annotations
 
@@ -23,12 +23,14 @@ from servant_core.choices import (
 )
 from servant_core.cli import later, options
 
-COMMANDS = "servant_core.cli.recognition"
+TRAIN = "servant_core.cli.train"
+PREDICT = "servant_core.cli.predict"
+EVALUATION = "servant_core.cli.evaluation"
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add `train`, `predict`, `eval audio|image|fusion` and `table` with their options; each
-    runs its `cmd_*` of `servant_core.cli.recognition`."""
+    runs its `cmd_*`, imported when it runs."""
     _register_train(subparsers.add_parser("train"))
     _register_predict(subparsers.add_parser("predict"))
     senses = subparsers.add_parser("eval").add_subparsers(
@@ -74,7 +76,7 @@ def _register_train(train: argparse.ArgumentParser) -> None:
         "held-out opinions; slower: each recogniser is refitted once per fold",
     )
     _json_option(train)
-    train.set_defaults(handler=later(COMMANDS, "cmd_train"))
+    train.set_defaults(handler=later(TRAIN, "cmd_train"))
 
 
 def _register_predict(predict: argparse.ArgumentParser) -> None:
@@ -84,7 +86,7 @@ def _register_predict(predict: argparse.ArgumentParser) -> None:
     predict.add_argument("--image", type=Path, nargs="+", default=[], help="pictures, in order")
     _fusion_options(predict)
     _json_option(predict)
-    predict.set_defaults(handler=later(COMMANDS, "cmd_predict"))
+    predict.set_defaults(handler=later(PREDICT, "cmd_predict"))
 
 
 def _register_eval_audio(audio: argparse.ArgumentParser) -> None:
@@ -112,7 +114,7 @@ def _register_eval_audio(audio: argparse.ArgumentParser) -> None:
     _audio_options(audio)
     _skip_bad_option(audio)
     _json_option(audio)
-    audio.set_defaults(handler=later(COMMANDS, "cmd_eval_audio"))
+    audio.set_defaults(handler=later(EVALUATION, "cmd_eval_audio"))
 
 
 def _protocol_options(audio: argparse.ArgumentParser) -> None:
@@ -169,7 +171,7 @@ def _register_eval_image(image: argparse.ArgumentParser) -> None:
     _seeds_option(image)
     _skip_bad_option(image)
     _json_option(image)
-    image.set_defaults(handler=later(COMMANDS, "cmd_eval_image"))
+    image.set_defaults(handler=later(EVALUATION, "cmd_eval_image"))
 
 
 def _register_eval_fusion(fusion: argparse.ArgumentParser) -> None:
@@ -186,7 +188,7 @@ def _register_eval_fusion(fusion: argparse.ArgumentParser) -> None:
     _seeds_option(fusion)
     _skip_bad_option(fusion)
     _json_option(fusion)
-    fusion.set_defaults(handler=later(COMMANDS, "cmd_eval_fusion"))
+    fusion.set_defaults(handler=later(EVALUATION, "cmd_eval_fusion"))
 
 
 def _register_table(table: argparse.ArgumentParser) -> None:
@@ -199,7 +201,7 @@ def _register_table(table: argparse.ArgumentParser) -> None:
     _method_options(table, paper=True)
     _skip_bad_option(table)
     _json_option(table)
-    table.set_defaults(handler=later(COMMANDS, "cmd_table"))
+    table.set_defaults(handler=later(EVALUATION, "cmd_table"))
 
 
 def _json_option(parser: argparse.ArgumentParser) -> None:
