@@ -287,6 +287,27 @@ def check_replaceable(
         )
 
 
+def check_folder_writable(path: str | os.PathLike[str], what: str) -> None:
+    """Refuse, before any work, a `what` at `path` whose folder cannot be written: a file on the
+    way where a folder should be, or a folder this user may not write (or on a read-only file
+    system). Folders still missing are fine when the nearest one that exists can be written:
+    the write makes them. Nothing is written here."""
+    path = Path(path)
+    folder = path.absolute().parent
+    while not os.path.exists(folder) and folder != folder.parent:  # os.path: never raises
+        folder = folder.parent
+    if not os.path.isdir(folder):
+        raise ServantError(
+            f"{path}: cannot save the {what} there: {folder} is a file, not a folder; "
+            "choose another place"
+        )
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ServantError(
+            f"{path}: cannot save the {what} there: the folder {folder} is not writable; "
+            "choose another place, or make the folder writable"
+        )
+
+
 def _read_only(path: Path) -> bool:
     """A file this user may not write, or whose owner made it read-only (`chmod a-w`): a
     replacement by rename never asks the file itself, so its mode is asked here (as root too)."""

@@ -101,6 +101,43 @@ def test_train_into_a_folder_or_a_read_only_place_is_one_line(tmp_path):
     assert_refused(run_cli("train", str(lib), "-o", "/proc/servant.npz"), "cannot save")
 
 
+@pytest.fixture
+def never_trains(monkeypatch):
+    """`servant train` fails the test if it gets as far as training."""
+    import servant_core.cli.train as train
+
+    def trained(*args):
+        raise AssertionError("trained before the model's folder was checked")
+
+    monkeypatch.setattr(train, "_train_recognisers", trained)
+
+
+def test_train_into_a_file_as_a_folder_is_refused_before_training(tmp_path, never_trains):
+    """A file where the model's folder should be (what root cannot write into either) is one
+    line before the library is read; nothing is written."""
+    lib = picture_library(tmp_path / "lib")
+    notes = tmp_path / "notes.txt"
+    notes.write_text("not a folder")
+    for output in (notes / "model.npz", notes / "models" / "model.npz"):
+        outcome = run_cli("train", str(lib), "-o", str(output))
+        assert_refused(outcome, f"{notes} is a file, not a folder", "choose another place")
+    assert notes.read_text() == "not a folder"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["lib", "notes.txt"]
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root may write into a read-only folder")
+def test_train_into_a_read_only_folder_is_refused_before_training(tmp_path, never_trains):
+    lib = picture_library(tmp_path / "lib")
+    kept = tmp_path / "kept"
+    kept.mkdir(mode=0o500)
+    try:
+        outcome = run_cli("train", str(lib), "-o", str(kept / "new" / "model.npz"))
+    finally:
+        kept.chmod(0o700)
+    assert_refused(outcome, f"the folder {kept} is not writable")
+    assert list(kept.iterdir()) == []
+
+
 @pytest.mark.devices
 def test_a_file_size_limit_leaves_the_old_model_intact(tmp_path):
     lib = picture_library(tmp_path / "lib")
