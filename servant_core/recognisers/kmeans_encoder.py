@@ -58,7 +58,6 @@ from typing import Any, ClassVar, Self
 import numpy as np
 from sklearn.cluster import KMeans
 from sklearn.exceptions import NotFittedError
-from sklearn.linear_model import LogisticRegression
 
 from servant_core.features.logmel import DEFAULT_FMAX, DEFAULT_FMIN, log_mel_windows
 from servant_core.recognisers.background import (
@@ -69,7 +68,20 @@ from servant_core.recognisers.background import (
 )
 from servant_core.recognisers.base import PERCENT, check_training_scenes, init_params
 from servant_core.recognisers.centroids import SceneCentroids
+from servant_core.recognisers.encoder_features import (
+    eq_curves,
+    equalised,
+    frame_statistics,
+    triangle_encoding,
+    window_crops,
+)
 from servant_core.recognisers.linear_head import LinearHeadAnswers
+from servant_core.recognisers.visit_head import (
+    fit_visit_head,
+    place_proba,
+    softmax_proba,
+    unit_rows,
+)
 
 ENCODER_RATE = 22050
 SCALE_FLOOR = 0.1
@@ -89,56 +101,6 @@ LEGACY_PARAMS: dict[str, Any] = {
     "encoding_weight": 1.0,
     "background": False,
 }
-
-
-def frame_statistics(frames: np.ndarray) -> np.ndarray:
-    """(n, 3·bands): per band, the mean and std over frames and the std of its frame-to-frame
-    change, of (n, frames, bands) log-mel windows."""
-    change = np.diff(frames, axis=1)
-    return np.concatenate([frames.mean(axis=1), frames.std(axis=1), change.std(axis=1)], axis=1)
-
-
-def triangle_encoding(frames: np.ndarray, codewords: np.ndarray) -> np.ndarray:
-    """(n, K): the triangle activations max(0, mean_k z − z_k) of each frame, where z_k is its
-    distance to codeword k, averaged over each window's frames (Coates, Lee & Ng 2011)."""
-    n, t, d = frames.shape
-    flat = frames.reshape(-1, d).astype(np.float32)
-    squared = (
-        np.sum(flat**2, axis=1, keepdims=True)
-        - 2.0 * flat @ codewords.T
-        + np.sum(codewords**2, axis=1)[None, :]
-    )
-    z = np.sqrt(np.maximum(squared, 0.0))
-    active = np.maximum(0.0, z.mean(axis=1, keepdims=True) - z)
-    return active.reshape(n, t, -1).mean(axis=1)
-
-
-def eq_curves(bands: int, strength: float, n: int) -> np.ndarray:
-    """(n, bands) equaliser curves in log10 units, each with zero mean (the level is kept): a tilt
-    and a bend of the log spectrum, `strength` at the band edges, their mix turned evenly around
-    the circle. Evenly spaced, not drawn at random: the fitted model does not depend on the
-    draw, which is what made the few-shot figures swing from one random state to the next."""
-    x = np.linspace(-1.0, 1.0, bands)
-    angles = np.pi / 4 + 2.0 * np.pi * np.arange(n) / n
-    curves = strength * (np.cos(angles)[:, None] * x + np.sin(angles)[:, None] * (x**2 - 1 / 3))
-    return curves - curves.mean(axis=1, keepdims=True)
-
-
-def equalised(frames: np.ndarray, curve: np.ndarray) -> np.ndarray:
-    """`frames` (…, bands) through one equaliser curve (bands,): how another microphone would
-    colour the same place."""
-    return (frames + curve).astype(np.float32)
-
-
-def unit_rows(D: np.ndarray) -> np.ndarray:
-    """Each row scaled to length 1 (a zero row stays zero)."""
-    return D / (np.linalg.norm(D, axis=1, keepdims=True) + 1e-12)
-
-
-def softmax_proba(scores: np.ndarray) -> np.ndarray:
-    scores = scores - scores.max(axis=1, keepdims=True)
-    e = np.exp(scores)
-    return e / e.sum(axis=1, keepdims=True)
 
 
 class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
@@ -254,7 +216,7 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
                 for seed in seeds
             ]
         ).astype(np.float32)
-        parts = [frames, *self._crops(X)]
+        parts = [frames, *window_crops(X, self.crops, self.crop_fraction)]
         D = np.vstack([self.describe(part) for part in parts]).astype(np.float64)
         # A codeword almost no training frame comes near has next to no spread; unfloored, a new
         # place that does come near it would sit thousands of spreads away on that one column.
@@ -301,14 +263,6 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
             return np.empty((0, self.train_descriptors_.shape[1]))
         return self._standardise(self.describe(found.frames).astype(np.float64))
 
-    def _crops(self, frames: np.ndarray) -> list[np.ndarray]:
-        """`crops` evenly spaced parts of the windows, each `crop_fraction` of a window long: with
-        a window or two a scene (a first teach session) the head still sees how a place varies
-        within itself."""
-        length = max(2, int(round(frames.shape[1] * self.crop_fraction)))
-        starts = np.linspace(0, frames.shape[1] - length, self.crops).astype(int)
-        return [frames[:, s : s + length] for s in starts]
-
     def _fit_heads(self) -> None:
         """The logistic head over every stored descriptor; the open set's centroids (one a
         scene, equal spreads) over the windows as heard, not their equalised copies."""
@@ -332,34 +286,21 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         return weights
 
     def _fit_head(self) -> None:
-        # One class a visit of a place (module docstring, 8), every visit weighing alike whatever
-        # its number of windows, and the background (`<elsewhere>`) as much as one place's visits
-        # on average. With one visit a place these are scikit-learn's balanced class weights.
-        pairs = np.stack([self.train_scenes_, self.train_visits_], axis=1)
-        keys, modes = np.unique(pairs, axis=0, return_inverse=True)
-        modes = modes.reshape(-1)
-        self.mode_scenes_ = keys[:, 0].astype(str)
-        n_modes = len(keys)
-        self.classes_ = sorted(set(self.mode_scenes_.tolist()))
-        places = len(self.classes_)
-        labels = np.concatenate([modes, np.full(len(self.background_descriptors_), n_modes)])
-        counts = np.bincount(labels, minlength=n_modes + 1)
-        share = np.ones(n_modes + 1)
-        share[n_modes] = self.elsewhere_weight * n_modes / places
-        classes = n_modes + int(counts[n_modes] > 0)
-        sample_weight = share[labels] / counts[labels] * len(labels) / classes
-        weights = self._column_weights()
-        rows = np.vstack([self.train_descriptors_, self.background_descriptors_])
-        head = LogisticRegression(C=self.C, max_iter=3000)
-        head.fit(rows * weights, labels, sample_weight=sample_weight)
-        # The weights folded into the coefficients: the head reads standardised descriptors.
-        coef, intercept = head.coef_ * weights, head.intercept_
-        if len(head.classes_) == 2:  # scikit-learn keeps one weight vector for two classes
-            coef = np.vstack([-coef / 2, coef / 2])
-            intercept = np.array([-intercept[0] / 2, intercept[0] / 2])
-        self.coef_, self.intercept_ = coef[:n_modes], intercept[:n_modes]
-        self.elsewhere_coef_ = coef[n_modes:].reshape(-1, coef.shape[1])
-        self.elsewhere_intercept_ = intercept[n_modes:]
+        head = fit_visit_head(
+            self.train_descriptors_,
+            self.train_scenes_,
+            self.train_visits_,
+            self.background_descriptors_,
+            self._column_weights(),
+            C=self.C,
+            elsewhere_weight=self.elsewhere_weight,
+        )
+        self.mode_scenes_, self.classes_ = head.mode_scenes, head.classes
+        self.coef_, self.intercept_ = head.coef, head.intercept
+        self.elsewhere_coef_, self.elsewhere_intercept_ = (
+            head.elsewhere_coef,
+            head.elsewhere_intercept,
+        )
 
     def fold_in(self, X: np.ndarray, scenes: Sequence[str]) -> Self:
         """Add windows with confirmed labels: both heads are refitted on the stored training
@@ -405,19 +346,9 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         if not hasattr(self, "coef_"):
             raise NotFittedError(f"this {type(self).__name__} is not fitted yet; call fit first")
 
-    def _places(self, mode_proba: np.ndarray, together: bool = False) -> np.ndarray:
-        """(n, scenes): each place's likeliest visit's probability, or all its visits' together
-        (module docstring, 8)."""
-        pool = np.sum if together else np.max
-        return np.stack(
-            [pool(mode_proba[:, self.mode_scenes_ == scene], axis=1) for scene in self.classes_],
-            axis=1,
-        )
-
     def _proba(self, D: np.ndarray) -> np.ndarray:
-        places = self._places(
-            softmax_proba((D @ self.coef_.T + self.intercept_) / self.temperature)
-        )
+        mode_proba = softmax_proba((D @ self.coef_.T + self.intercept_) / self.temperature)
+        places = place_proba(mode_proba, self.mode_scenes_, self.classes_)
         return places / places.sum(axis=1, keepdims=True)
 
     @property
@@ -463,7 +394,8 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         coef = np.vstack([self.coef_, self.elsewhere_coef_])
         intercept = np.concatenate([self.intercept_, self.elsewhere_intercept_])
         proba = softmax_proba((D @ coef.T + intercept) / self.temperature)
-        return self._places(proba[:, : len(self.mode_scenes_)], together=True)
+        mode_proba = proba[:, : len(self.mode_scenes_)]
+        return place_proba(mode_proba, self.mode_scenes_, self.classes_, together=True)
 
     # -- model files ------------------------------------------------------------------------
 
