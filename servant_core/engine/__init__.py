@@ -2,8 +2,9 @@
 `bus` (events), `sense_devices` and `loop` (the devices side of the sense loop), `judging`
 (windows and pictures to predictions, decisions and the arm), `unknown_places` ("What is this
 place?" and its label), `models` and `learning` (the recognisers; retrain, fold-in, saving),
-`arm` (the link and the poses), `fusion_settings` (the user's fusion windows) and `factories`
-(the demo's and the live engine).
+`arm` (the link and the poses; `arm_commands`, the engine's), `parts` (the parts made and wired
+together), `fusion_settings` (the user's fusion windows) and `factories` (the demo's and the
+live engine).
 
 Front ends import from here.
 """

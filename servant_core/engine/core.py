@@ -11,7 +11,8 @@ PortAudio's own thread and only queues blocks.)
 `sense_devices` and `loop` (the devices side of the sense loop), `judging` (windows and pictures
 to predictions, decisions and the arm), `unknown_places` ("What is this place?" and its label),
 `models` and `learning` (the recognisers, retrain, fold-in, saving), `arm` (the link, poses,
-moves), and `factories` (the demo's engine and the live one).
+moves; `arm_commands` offers them), and `factories` (the demo's engine and the live one); `parts`
+makes them and wires them together.
 
 Subscribers are called on the sense thread (or on the thread calling `label_unknown`, `retrain`,
 `arm`…): they must be quick and must not call back into `start`/`stop`. A front end posts the
@@ -26,7 +27,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -39,23 +40,19 @@ from servant_core.capture.source import (
     MonotonicClock,
     SampleSource,
 )
-from servant_core.engine.arm import ArmControl, PoseFor
-from servant_core.engine.bus import EventBus, Subscriber
+from servant_core.engine.arm_commands import ArmCommands
+from servant_core.engine.bus import Subscriber
 from servant_core.engine.delegated import Delegated
 from servant_core.engine.fusion_settings import fusion_config, reconfigured
-from servant_core.engine.judging import Judge
 from servant_core.engine.loop import SPECTRUM_FPS, SPECTRUM_SIZE, DeviceMakers
-from servant_core.engine.models import Models
-from servant_core.engine.sense_devices import SenseDevices
-from servant_core.engine.unknown_places import UnknownPlaces
+from servant_core.engine.parts import EngineParts
 from servant_core.errors import ServantError
 from servant_core.events import DeviceStatus, Notice
-from servant_core.fusion import FusionPolicy, SequentialFusion
-from servant_core.fusion.pipeline import DecisionPipeline
+from servant_core.fusion import FusionPolicy
 from servant_core.fusion.smoothing import SceneSmoother
 from servant_core.library import SceneLibrary
-from servant_core.recognisers import FRESH_METHODS, Recogniser
-from servant_core.senses import SAMPLE_SENSES, SENSES
+from servant_core.recognisers import Recogniser
+from servant_core.senses import SAMPLE_SENSES
 from servant_core.storage import data_dir
 
 log = logging.getLogger(__name__)
@@ -71,7 +68,7 @@ NO_MODEL = (
 )
 
 
-class Engine:
+class Engine(ArmCommands):
     """Senses → recognisers → fusion → decisions (→ poses → arm), as events to subscribers.
 
     Parameters
@@ -118,6 +115,16 @@ class Engine:
     fusion = Delegated("decisions", "policy")  # the fusion policy the decision pipeline feeds
     smoother = Delegated("decisions")
 
+    _thread: threading.Thread | None = None  # the sense thread, while started
+    _opened = False  # the senses were opened (`start`, or a first `run_until`)
+    sensor_port: str | None = None  # the settings' board the senses were opened on
+    # the user's settings the engine was built on, the command line's overrides applied (a
+    # front end starts from these, not from the file: `servant run --port P` keeps P)
+    user_settings: Any = None
+    _sensor_port_told: str | None = None
+    # how Settings' camera and microphone are opened while running (None: they stay as built)
+    device_makers: DeviceMakers | None = None
+
     def __init__(
         self,
         *,
@@ -146,12 +153,6 @@ class Engine:
         unknown = sorted(set(self.samples) - set(SAMPLE_SENSES))
         if unknown:
             raise ValueError(f"no sample sense named {', '.join(unknown)}")
-        # where every opinion becomes a decision (its policy is `fusion`, its smoother `smoother`)
-        self.decisions = DecisionPipeline(
-            fusion if fusion is not None else SequentialFusion(),
-            smoother,
-            ["acoustic", "visual", *(SENSES[sense].role for sense in self.samples)],
-        )
         self.clock: Callable[[], float] = clock or MonotonicClock()
         self.window_seconds = float(
             window_seconds or getattr(acoustic, "window_seconds", None) or DEFAULT_WINDOW_SECONDS
@@ -159,67 +160,30 @@ class Engine:
         self.reopen_seconds = reopen_seconds
         self.library_root = Path(library_root) if library_root else None
         self.ask_after_s = ask_after_s
-
-        self._lock = threading.RLock()  # models, fusion, scores
-        self._bus = EventBus(self.clock)
-        self._arm = ArmControl(self._bus, reopen_seconds)
-        self._places = UnknownPlaces(
-            self._bus, ask_after_s=ask_after_s, window_seconds=self.window_seconds
-        )
-        self._unknowns = self._places.store  # the kept windows, by id (benches keep their own)
-        self._models = Models(
+        parts = EngineParts.build(
+            self,
             acoustic=acoustic,
             visual=visual,
-            samples=sample_recognisers or {},
-            decisions=self.decisions,
-            bus=self._bus,
-            lock=self._lock,
-            fresh_methods={**FRESH_METHODS, **(fresh_methods or {})},
-            path=Path(model_path) if model_path else None,
-            window_seconds=self.window_seconds,
-            on_new_sound=lambda: self._judge.forget(),
-        )
-        self._judge = Judge(
-            models=self._models,
-            decisions=self.decisions,
-            places=self._places,
-            bus=self._bus,
-            arm=self._arm,
-            lock=self._lock,
+            sample_recognisers=sample_recognisers or {},
+            fusion=fusion,
+            smoother=smoother,
+            fresh_methods=fresh_methods or {},
+            model_path=model_path,
             confidence_threshold=confidence_threshold,
-        )
-        judge = self._judge
-        self._devices = SenseDevices(
-            audio,
-            camera,
-            self.samples,
-            self._bus,
-            on_window=lambda window, rate: judge.guarded(
-                "acoustic prediction", judge.on_window, window, rate
-            ),
-            on_samples=lambda name, window, rate: judge.guarded(
-                f"{name} prediction", judge.on_samples, name, window, rate
-            ),
-            window_seconds=self.window_seconds,
-            reopen_seconds=reopen_seconds,
             spectrum_fps=spectrum_fps,
             spectrum_size=spectrum_size,
         )
-
+        # where every opinion becomes a decision (its policy is `fusion`, its smoother `smoother`)
+        self.decisions = parts.decisions
+        self._lock, self._bus, self._arm = parts.lock, parts.bus, parts.arm
+        self._places, self._models, self._judge = parts.places, parts.models, parts.judge
+        self._devices = parts.devices
+        self._unknowns = self._places.store  # the kept windows, by id (benches keep their own)
         self._stop = threading.Event()
         self._life = threading.Lock()  # start and stop, one at a time
         self._finished = threading.Event()
-        self._thread: threading.Thread | None = None
         self._cleanups: list[Callable[[], None]] = []
         self._notes: list[str] = []  # said to every subscriber when the senses open
-        self._opened = False
-        self.sensor_port: str | None = None  # the settings' board the senses were opened on
-        # the user's settings the engine was built on, the command line's overrides applied (a
-        # front end starts from these, not from the file: `servant run --port P` keeps P)
-        self.user_settings: Any = None
-        self._sensor_port_told: str | None = None
-        # how Settings' camera and microphone are opened while running (None: they stay as built)
-        self.device_makers: DeviceMakers | None = None
 
     # --- subscribers and status -------------------------------------------------------------
 
@@ -335,47 +299,7 @@ class Engine:
             return
         self._judge.look(self._devices.sight)
 
-    # --- the arm (see `arm.ArmControl`) -------------------------------------------------------
-
-    @property
-    def link(self) -> Any:
-        """The attached servo link, or None."""
-        return self._arm.link
-
-    @property
-    def pose_for(self) -> PoseFor | None:
-        """What turns a decided scene into a pose (`set_action_learner`), or None."""
-        return self._arm.pose_for
-
-    def set_action_learner(self, pose_for: PoseFor | None) -> None:
-        """Attach what turns a detected scene into a pose: a callable
-        (scene, scores, confidence) → {joint: degrees} or None, e.g. `ActionLearner.pose_for`.
-        `scores` are the latest per-sense scene scores; `confidence` (percent) is the smaller of
-        the two senses' probabilities for the scene. None detaches it."""
-        self._arm.pose_for = pose_for
-
-    def set_arm(self, link: Any, why_none: str = "servo: no arm attached") -> None:
-        """Attach a servo link (`servant_core.servo.link`: `.arm()`, `.disarm()`, `.armed`,
-        `.move_to(pose)`, `.status()`), or None to detach it (`ArmControl.set_arm`)."""
-        self._arm.set_arm(link, why_none)
-
-    def connect_arm(self, port: str | None, protocol: str, joints: Sequence[Any]) -> None:
-        """Open the arm the settings name, disarmed, and attach it (`ArmControl.connect`): a
-        fault is the servo's status, never raised. The engine closes it when it stops."""
-        self._arm.connect(port, protocol, joints)
-
-    def arm(self) -> None:
-        """Allow the arm to move (delegates to the link); ServantError if no arm is attached."""
-        self._arm.arm()
-
-    def disarm(self) -> None:
-        """Forbid the arm to move; does nothing when no arm is attached (safe to call always)."""
-        self._arm.disarm()
-
-    def read_arm_pose(self) -> dict[str, float]:
-        """The arm's joints' angles as its controller reports them, armed or not (teach mode's
-        "Use the arm's pose"); ServantError when there is no arm or it says nothing."""
-        return self._arm.read_pose()
+    # --- the user's settings (the arm's commands: `arm_commands.ArmCommands`) ----------------
 
     def apply_settings(self, settings: Any) -> None:
         """Use the user's settings (`servant_core.settings.Settings`) from now on: the fusion
