@@ -13,15 +13,14 @@ from textual.binding import Binding
 from textual.screen import Screen
 from textual.worker import Worker, WorkerState
 
-from servant_core.event_text import SILENCE, arm_text, confidence_text, left_text, place
+from servant_core.engine.delegated import Delegated
+from servant_core.event_text import left_text
 from servant_core.events import (
     AcousticPrediction,
     ArmState,
-    Decision,
     DeviceStatus,
     ErrorEvent,
     Notice,
-    SensePrediction,
     SensorFrame,
     SpectrumFrame,
     UnknownScene,
@@ -31,6 +30,7 @@ from servant_core.fusion.sequential import scene_line
 from servant_core.log_news import LogNews
 from servant_core.storage import data_dir
 from servant_tui.heap import release_free_heap
+from servant_tui.log_text import log_text
 from servant_tui.messages import (
     EngineEvent,
     RecordingStopped,
@@ -38,9 +38,10 @@ from servant_tui.messages import (
     SpectrumUpdate,
     TrainingDone,
 )
-from servant_tui.screens.dialogs import HelpScreen, LabelPrompt
+from servant_tui.place_question import PROMPT_EVERY_S as PROMPT_EVERY_S  # bench/wearer_day
+from servant_tui.place_question import PlaceQuestion
+from servant_tui.screens.dialogs import HelpScreen
 from servant_tui.screens.live import LiveScreen, device_message
-from servant_tui.widgets.scene import heard_by, leaned_text
 from servant_tui.widgets.text import clock, error_text
 
 if TYPE_CHECKING:
@@ -91,27 +92,11 @@ def default_library_root() -> Path:
     return data_dir() / "library"
 
 
-# How often an unknown place may interrupt the wearer with a question, at most; one that the
-# wearer skips keeps quiet for longer. A place heard while teaching or editing is only logged.
-PROMPT_EVERY_S = 60.0
-PROMPT_AFTER_SKIP_S = 300.0
-# An open question closes by itself once the sense asked about has named taught places this long
-# (three 5 s windows in a row): the wearer walked into a place Servant knows. Not at one window
-# that happens to name one: at a building site heard as a café every fourth window, the question
-# vanished 5 s after it was asked, each time, before the wearer could answer it.
-WITHDRAW_AFTER_S = 10.0
-
 # How often the C heaps' free pages go back to the system. Under an open dialog Textual redraws
 # the whole screen beneath it for every engine event; each redraw's short-lived strips and
 # segments leave free pages in glibc's heaps (its per-thread arenas among them) that it does not
 # return by itself (issue 13's soak, a prompt left open: +4.4 MB/h untrimmed, +0.8 trimmed).
 HEAP_TRIM_EVERY_S = 60.0
-
-
-def log_confidence(event: Any) -> str:
-    """A confidence for the log, its unit bound to its number: the log wraps at spaces, and
-    "(67.5" at the end of one row with "%)" alone on the next reads badly."""
-    return confidence_text(event.confidence, event.confidence_unit).replace(" %", "%")
 
 
 class ServantApp(App[None]):
@@ -134,6 +119,10 @@ class ServantApp(App[None]):
         Binding("shift+tab", "focus_previous", show=False, priority=True),
     ]
 
+    # the question's, under the names bench/label_cost.py drives the app by
+    _quiet_until = Delegated("question", "quiet_until")
+    _ask_label = Delegated("question", "ask")
+
     def __init__(
         self,
         engine: EngineLike,
@@ -152,10 +141,7 @@ class ServantApp(App[None]):
         self.arm_state: ArmState | None = None
         self.seen_scenes: set[str] = set()
         self.live = LiveScreen(sample_senses=engine.sample_senses)
-        self._prompt: LabelPrompt | None = None  # the open "What is this place?"
-        self._quiet_until: float | None = None  # engine time before which no place is asked about
-        self._deferred = False  # an unknown place was met behind another screen, and logged
-        self._named_since: float | None = None  # since when the sense asked about names a place
+        self.question = PlaceQuestion(self)  # "What is this place?"
         self._noticed: set[str] = set()
         self.news = LogNews()  # which events the log says, as `servant run --headless` does
         engine.subscribe(self._from_engine)
@@ -250,7 +236,8 @@ class ServantApp(App[None]):
         elif isinstance(event, (AcousticPrediction, VisualPrediction)) and event.scene:
             self.seen_scenes.add(event.scene)
             if isinstance(event, AcousticPrediction):
-                self._deferred = False  # the next unknown place met behind a screen is logged
+                # the next unknown place met behind a screen is logged
+                self.question.deferred = False
         news = self.news(event)
         line = self._log_text(event, news.silent) if news.said else None
         if line:
@@ -266,51 +253,15 @@ class ServantApp(App[None]):
         elif isinstance(event, DeviceStatus) and not event.ok:
             self.notify(f"{event.device}: {device_message(event)}", severity="warning")
         elif isinstance(event, UnknownScene):
-            self._ask_label(event)
-        self._withdraw_question(event)
+            self.question.ask(event)
+        self.question.withdraw_if_stale(event)
         for screen in self._event_screens():
             screen.show_event(event)
 
     def _event_screens(self) -> Iterable[Any]:
         return [s for s in self.screen_stack if hasattr(s, "show_event")]
 
-    @staticmethod
-    def _log_text(event: Any, silent: bool = False) -> str | None:
-        """The log's line for an event; `silent`: the event is the sound of a silent window."""
-        if isinstance(event, ArmState):
-            if event.pose_of is not None:
-                return escape(arm_text(event))
-            if not event.connected:
-                return "[red]arm not connected[/]"
-            return "[bold red]arm ARMED[/]" if event.armed else "arm disarmed"
-        if isinstance(event, Decision):
-            leaned = leaned_text(event)
-            because = f"; {leaned}" if leaned else ""
-            if event.scene:
-                confidence = log_confidence(event)
-                return f"[bold green]{escape(event.line)} [/]({confidence}{because})"
-            if leaned:
-                return f"[yellow]{escape(event.line)} [/]({leaned})"
-            return f"[yellow]{escape(event.line)}[/]"
-        if isinstance(event, (AcousticPrediction, VisualPrediction)):
-            verb = "hears" if isinstance(event, AcousticPrediction) else "sees"
-            if event.scene is None:  # a confidence in no scene says nothing
-                return f"{verb} {SILENCE if silent else place(None)}"
-            confidence = log_confidence(event)
-            return f"{verb} {escape(place(event.scene))} ({confidence})"
-        if isinstance(event, SensePrediction):
-            if event.scene is None:
-                return f"{event.sense}: {place(None)}"
-            confidence = log_confidence(event)
-            return f"{event.sense}: {escape(place(event.scene))} ({confidence})"
-        if isinstance(event, DeviceStatus):
-            style = "dim" if event.ok else "red"
-            return f"[{style}]{event.device}: {escape(device_message(event))}[/]"
-        if isinstance(event, ErrorEvent):
-            return f"[bold red]{escape(event.message)}[/]"
-        if isinstance(event, Notice):
-            return f"[cyan]{escape(event.message)}[/]"
-        return None
+    _log_text = staticmethod(log_text)  # the log's line for an event
 
     def log_line(self, t: float | None, line: str) -> None:
         # the space ends the styled run: a reader trimming runs keeps the words apart
@@ -327,67 +278,7 @@ class ServantApp(App[None]):
         if event.state == WorkerState.ERROR and event.worker.error is not None:
             self.report_error(event.worker.error)
 
-    # -- open set: ask the user to name a place ---------------------------------------------------
-
-    def _ask_label(self, event: UnknownScene) -> None:
-        """Ask the wearer to name an unknown place, unless a question is open, another screen
-        (teach mode, the library, settings) is in front, or one was asked or skipped lately.
-        While a question is open, the engine asking again about the same sense (the place still
-        unknown) moves the answer to its newest window: the engine keeps only its last few
-        unknown windows, and a wearer answering after a minute and a half labelled a window
-        already dropped ("no such unknown window")."""
-        if self._prompt is not None:
-            if event.sense == self._prompt.event.sense:
-                self._prompt.event = event
-            return
-        # the log says so when it asks, or once when another screen keeps it from asking; not
-        # at every window the engine would ask at (the lines "hears an unknown place" say those)
-        nearest = f", nearest {escape(event.nearest_scene)}" if event.nearest_scene else ""
-        said = f"[magenta]unknown place ({event.sense}{nearest})"
-        if self.screen is not self.live:
-            if not self._deferred:
-                self._deferred = True
-                self.log_line(event.t, f"{said}: asked on the live screen[/]")
-            return
-        if self._quiet_until is not None and event.t < self._quiet_until:
-            return
-        self._deferred = False
-        self._named_since = None
-        prompt = self._prompt = LabelPrompt(event, sorted(self.known_scenes))
-        self.log_line(event.t, f"{said}: asking for a label[/]")
-
-        def answered(scene: str | None) -> None:
-            self._prompt = None
-            skipped = scene is None and not prompt.withdrawn
-            self._quiet_until = event.t + (PROMPT_AFTER_SKIP_S if skipped else PROMPT_EVERY_S)
-            if skipped:  # Escape or "Not now": the pane stops saying it is asking
-                self.live.scene.not_now(self._quiet_until)
-                self.log_line(event.t, f"Not now: no question before {clock(self._quiet_until)}")
-            if scene:
-                self.label_unknown(prompt.event.window_id, scene)
-
-        self.push_screen(prompt, answered)
-
-    def _withdraw_question(self, event: Any) -> None:
-        """An open "What is this place?" is stale once the sense it asked for has named taught
-        places for `WITHDRAW_AFTER_S`: the wearer walked on (or the place was known after all).
-        The question closes by itself, said in the log; no answer is taken for a skip. It stays
-        while the wearer has begun typing an answer, and a place decided on one window does not
-        close it: the label is for the stretch asked about, which is still unknown."""
-        prompt = self._prompt
-        if prompt is None or prompt.withdrawn or not heard_by(event, prompt.event.sense):
-            return
-        if not event.scene:
-            self._named_since = None
-            return
-        if self._named_since is None:
-            self._named_since = event.t
-        if event.t - self._named_since < WITHDRAW_AFTER_S or prompt.answering:
-            return
-        self.log_line(
-            event.t, f"[magenta]question withdrawn: this is {escape(place(event.scene))} now[/]"
-        )
-        prompt.withdraw()
+    # -- open set: the wearer names a place (`place_question.PlaceQuestion` asks) -------------
 
     @work(thread=True, group="label", exit_on_error=False)
     def label_unknown(self, window_id: str, scene: str) -> None:
