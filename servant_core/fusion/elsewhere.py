@@ -131,9 +131,9 @@ def steady_open(
     """What a sense that knows somewhere else says of a window, held steady (pure).
 
     - Arriving: each taught place gets the smaller of its probability in this window and in the
-      one before, so a place is named only when two windows in a row say so: neither one odd
-      window nor the last place, lingering in the first window of the next, can name a place
-      alone.
+      one before, so a place is named when two windows in a row say so: neither one odd window
+      nor the last place, lingering in the first window of the next, can name a place alone,
+      unless that window is sure of it (below).
     - Staying: the place named at the window before (`named_before`) stays named while it is
       still this window's likeliest and the two windows give it half or more on average: one
       odd window at a place the wearer is in (a door, a voice close by) does not unname it for
