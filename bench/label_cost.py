@@ -222,8 +222,8 @@ async def app_labels(engine: Engine, pictures: list[np.ndarray], places: list[st
         await pilot.pause(3)
         for picture, place in zip(pictures, places, strict=True):
             window = engine._unknowns.keep(Kept("image", picture))
-            app._quiet_until = None  # asked at once, not minutes after the last answer
-            app._ask_label(UnknownScene(engine.clock(), "image", "cafe", window))
+            app.question.quiet_until = None  # asked at once, not minutes after the last answer
+            app.question.ask(UnknownScene(engine.clock(), "image", "cafe", window))
             while not (isinstance(app.screen, LabelPrompt) and app.screen.query("#scene")):
                 await pilot.pause(0.05)
             app.screen.query_one("#scene", Input).value = place

@@ -13,7 +13,6 @@ from textual.binding import Binding
 from textual.screen import Screen
 from textual.worker import Worker, WorkerState
 
-from servant_core.engine.delegated import Delegated
 from servant_core.event_text import left_text
 from servant_core.events import (
     AcousticPrediction,
@@ -118,10 +117,6 @@ class ServantApp(App[None]):
         Binding("tab", "focus_next", show=False, priority=True),
         Binding("shift+tab", "focus_previous", show=False, priority=True),
     ]
-
-    # the question's, under the names bench/label_cost.py drives the app by
-    _quiet_until = Delegated("question", "quiet_until")
-    _ask_label = Delegated("question", "ask")
 
     def __init__(
         self,
