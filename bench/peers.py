@@ -29,7 +29,7 @@ The picture rows come from `bench/picture_peers.py` (`picture_rows`) when it is 
 
     OMP_NUM_THREADS=1 python bench/peers.py [--data ../shared/data] [--seeds 1] [--json FILE]
         [--protocols source,recording] [--methods kmeans-encoder,...] [--no-pictures]
-        [--audio ../shared/data/audio/tut2017]
+        [--audio ../shared/data/audio/tut2017] [--servant-rate 48000]
 """
 
 from __future__ import annotations
@@ -160,14 +160,16 @@ PEERS: dict[str, tuple[Callable[[np.ndarray], np.ndarray], Callable[[int | None]
 
 
 def featurize_all(
-    library: SceneLibrary, featurizers: dict[str, Callable[[np.ndarray], np.ndarray]]
+    library: SceneLibrary,
+    featurizers: dict[str, Callable[[np.ndarray], np.ndarray]],
+    rate: int = RATE,
 ) -> dict[str, WindowFeatures]:
-    """Each recording read once; every featurizer applied to its windows."""
+    """Each recording read once at `rate`; every featurizer applied to its windows."""
     parts: dict[str, list[np.ndarray]] = {name: [] for name in featurizers}
     scenes: list[str] = []
     recording: list[int] = []
     position: list[int] = []
-    for index, rec, windows in iter_recording_windows(library.recordings, RATE, WINDOW_SECONDS):
+    for index, rec, windows in iter_recording_windows(library.recordings, rate, WINDOW_SECONDS):
         for name, featurize in featurizers.items():
             parts[name].append(featurize(windows))
         scenes += [rec.scene] * len(windows)
@@ -218,16 +220,20 @@ def audio_rows(
     seeds: int,
     protocols: tuple[str, ...] = PROTOCOLS,
     methods: tuple[str, ...] | None = None,
+    servant_rate: int = RATE,
 ) -> list[dict[str, Any]]:
+    """Every method's rows; the peers hear the windows at RATE, Servant's at `servant_rate`."""
     library = SceneLibrary.scan(audio_root)
-    servant = {m: make_audio_recogniser(m, rate=RATE) for m in SERVANT_METHODS}
-    featurizers: dict[str, Callable[[np.ndarray], np.ndarray]] = {
-        name: featurize for name, (featurize, _) in PEERS.items()
-    }
-    featurizers.update({m: model.featurize for m, model in servant.items()})
+    servant = {m: make_audio_recogniser(m, rate=servant_rate) for m in SERVANT_METHODS}
+    Featurize = Callable[[np.ndarray], np.ndarray]
+    peers: dict[str, Featurize] = {name: featurize for name, (featurize, _) in PEERS.items()}
+    own: dict[str, Featurize] = {m: model.featurize for m, model in servant.items()}
     if methods is not None:
-        featurizers = {n: f for n, f in featurizers.items() if n.startswith(methods)}
-    features = featurize_all(library, featurizers)
+        peers = {n: f for n, f in peers.items() if n.startswith(methods)}
+        own = {n: f for n, f in own.items() if n.startswith(methods)}
+    features = featurize_all(library, peers) if peers else {}
+    if own:
+        features.update(featurize_all(library, own, servant_rate))
     names = [str(r.path.relative_to(library.root)) for r in library.recordings]
     rows = []
     for method, wf in features.items():
@@ -237,7 +243,7 @@ def audio_rows(
         else:
             # no recording of the library is also "somewhere else" (its background)
             make = lambda seed, m=method: kept_out(  # noqa: E731
-                make_audio_recogniser(m, **seeded_params({"rate": RATE}, m, "audio", seed)),
+                make_audio_recogniser(m, **seeded_params({"rate": servant_rate}, m, "audio", seed)),
                 library.recordings,
             )
         for column, keep, plans in protocol_plans(wf, protocols):
@@ -308,12 +314,19 @@ def main() -> None:
         help="comma-separated rows, each a method or the start of a peer's name (MFCC, log-mel; "
         "default: all)",
     )
+    parser.add_argument(
+        "--servant-rate",
+        type=int,
+        default=RATE,
+        help="the sample rate Servant's methods hear the windows at (default: the peers' "
+        "%(default)s; 48000 gives birdnet its network's own rate and its background)",
+    )
     args = parser.parse_args()
     unknown = set(args.protocols) - set(PROTOCOLS)
     if unknown:
         parser.error(f"no column {', '.join(sorted(unknown))}; choose from {', '.join(PROTOCOLS)}")
     audio = args.audio or args.data / "audio" / "dev"
-    rows = audio_rows(audio, args.seeds, args.protocols, args.methods)
+    rows = audio_rows(audio, args.seeds, args.protocols, args.methods, args.servant_rate)
     print(f"audio: {audio}, balanced accuracy (± std over {args.seeds} seeds)")
     print(table(rows, figure))
     print("\naudio: log loss")
