@@ -49,7 +49,8 @@ class SceneStep(TeachStep):
         yield Label("Pick the scene you are in, or name a new one.")
         yield KnownScenes([(s, s) for s in self._scenes], prompt="known scenes", id="known")
         yield Input(
-            placeholder="new scene name, e.g. CoffeeScene",
+            # README step 2's name: the log says CafeScene (a CoffeeScene was CoffeeSceneScene)
+            placeholder="new scene name, e.g. cafe",
             id="new-scene",
             select_on_focus=False,  # a letter the known scenes passed on stays
         )
