@@ -95,6 +95,26 @@ async def test_evaluate_on_a_taught_library_leaves_one_sample_out(tmp_path):
         assert "leaving one recording out" in str(screen.query_one("#library-status").render())
 
 
+async def test_evaluate_after_teach_mode_tests_every_sample_beside_a_longer_recording(tmp_path):
+    """Issue 39 item 5: Library `e` after teach mode, with one longer recording in the library,
+    said `evaluated 3 test windows`, a recall for one place only: the later part of the longer
+    recording was the test, and the 5 s samples taught were never tested."""
+    root = taught_library(tmp_path / "library", 3)
+    write_wav(root / "cafe" / "long.wav", noise_recording(20.0, 500.0, seed=99), RATE)
+    app = ServantApp(ReplayEngine(), library_root=root)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await pilot.press("l")
+        await settle(pilot, lambda: isinstance(app.screen, LibraryScreen))
+        screen = app.screen
+        await pilot.press("e")
+        await settle(pilot, lambda: screen.evaluation is not None, tries=3000)
+        assert screen.evaluation["protocol"] == "recording"
+        assert screen.evaluation["n_test"] == 3 + 3 + 4  # every window of every recording
+        assert set(screen.evaluation["per_class"]) == {"cafe", "street"}
+        status = str(screen.query_one("#library-status").render())
+        assert "evaluated 10 test windows, leaving one recording out" in status, status
+
+
 async def test_evaluate_says_what_to_record_when_one_sample_a_place_is_too_few(tmp_path):
     app = ServantApp(ReplayEngine(), library_root=taught_library(tmp_path / "library", 1))
     async with app.run_test(size=(100, 30)) as pilot:
