@@ -81,16 +81,22 @@ def taught_library(root, samples: int):
     return root
 
 
+async def evaluated(pilot, app: ServantApp) -> LibraryScreen:
+    """`l`, then `e`: the Library once its evaluation is done."""
+    await pilot.press("l")
+    await settle(pilot, lambda: isinstance(app.screen, LibraryScreen))
+    screen = app.screen
+    await pilot.press("e")
+    await settle(pilot, lambda: screen.evaluation is not None, tries=3000)
+    return screen
+
+
 async def test_evaluate_on_a_taught_library_leaves_one_sample_out(tmp_path):
     """Issue 22 item 4: `nothing to evaluate: no test window or picture` on every library taught
     in the app, since each 5 s recording is one window."""
     app = ServantApp(ReplayEngine(), library_root=taught_library(tmp_path / "library", 2))
     async with app.run_test(size=(100, 30)) as pilot:
-        await pilot.press("l")
-        await settle(pilot, lambda: isinstance(app.screen, LibraryScreen))
-        screen = app.screen
-        await pilot.press("e")
-        await settle(pilot, lambda: screen.evaluation is not None, tries=3000)
+        screen = await evaluated(pilot, app)
         assert screen.evaluation["protocol"] == "recording" and screen.evaluation["n_test"] == 4
         assert "leaving one recording out" in str(screen.query_one("#library-status").render())
 
@@ -103,11 +109,7 @@ async def test_evaluate_after_teach_mode_tests_every_sample_beside_a_longer_reco
     write_wav(root / "cafe" / "long.wav", noise_recording(20.0, 500.0, seed=99), RATE)
     app = ServantApp(ReplayEngine(), library_root=root)
     async with app.run_test(size=(100, 30)) as pilot:
-        await pilot.press("l")
-        await settle(pilot, lambda: isinstance(app.screen, LibraryScreen))
-        screen = app.screen
-        await pilot.press("e")
-        await settle(pilot, lambda: screen.evaluation is not None, tries=3000)
+        screen = await evaluated(pilot, app)
         assert screen.evaluation["protocol"] == "recording"
         assert screen.evaluation["n_test"] == 3 + 3 + 4  # every window of every recording
         assert set(screen.evaluation["per_class"]) == {"cafe", "street"}
