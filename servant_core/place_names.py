@@ -1,29 +1,11 @@
 """What a place's name may be: the one rule for every name a user gives a place.
 
-A place's name is a scene folder of the library (`ROOT/<place>/`), a label in the teach records
-and a word on the screen, so it must be all three at once. `place_name` decides, for the
-engine's labels, teach mode, the library's relabel dialog and `servant teach`; `printable_name`
-prints a name found on disk (made by hand, or before this rule) without letting it split or
-command a line.
-
-The rule, for a name stripped of surrounding spaces:
-- at most `MAX_NAME_BYTES` bytes of UTF-8. A file system limits a name in bytes, not letters
-  (255 on ext4 and APFS, 143 on an eCryptfs home), and the name is shown beside its confidence on
-  an 80-column line; 64 bytes is 64 ASCII letters, 32 Greek or Cyrillic, 21 Chinese, 16 emoji;
-- no control, format, surrogate, private-use or line/paragraph separator character (Unicode
-  categories Cc, Cf, Cs, Co, Zl, Zp): a newline splits a log line, ESC commands the terminal,
-  U+202E shows the name backwards, NUL cannot be in a file name, and a lone surrogate cannot be
-  written as UTF-8 at all;
-- no `/` or `\\`, no leading `.`, not `.` or `..`: one folder, visible, inside the library;
-- not `UNKNOWN`, the name of no place;
-- not a file (or anything but a folder) already in the library.
-
-Names are compared as a case-insensitive file system would, and more: NFKC-normalised and
-case-folded (`Cafe`, `CAFE`, `Ｃａｆｅ` are one key). A name matching a place already known is
-that place, in its existing spelling: `Cafe` typed when `cafe` exists means `cafe`, since that is
-what the user meant, and on a case-insensitive disk it is the same folder anyway. Refusing would
-only make them type it again.
-"""
+A name (stripped) is a library folder, a teach-record label and a word on screen at once, so
+`place_name` refuses: over `MAX_NAME_BYTES` bytes of UTF-8; characters of Unicode categories Cc,
+Cf, Cs, Co, Zl, Zp; `/` or `\\`, a leading `.`, `.` or `..`; `UNKNOWN`; a non-folder already in the
+library. Names are one place when NFKC-normalised and case-folded (`place_key`): a name matching a
+known place is that place, in its existing spelling. `printable_name` prints a name found on disk
+without letting it split or command a line."""
 
 from __future__ import annotations
 

@@ -1,27 +1,11 @@
 """The engine: owns the senses, the recognisers, the fusion policy and the arm; emits events.
 
-One sense thread does the work. It takes audio blocks into a ring (`loop.Hearing`), which cuts
-consecutive windows (5 s) that are judged (`judging`), and — between blocks — lets the fusion
-policy tick and grabs a picture (`loop.Sight`) whenever the policy wants one. Doing it all on one
-thread keeps the order of events a pure function of the input: a demo run on a `ManualClock`
-gives the same events on every machine. (The microphone's PortAudio callback runs on
-PortAudio's own thread and only queues blocks.)
-
-`Engine` coordinates its parts, by role: `bus` (subscribers, statuses, errors said once),
-`sense_devices` and `loop` (the devices side of the sense loop), `judging` (windows and pictures
-to predictions, decisions and the arm), `unknown_places` ("What is this place?" and its label),
-`models` and `learning` (the recognisers, retrain, fold-in, saving), `arm` (the link, poses,
-moves; `arm_commands` offers them), and `factories` (the demo's engine and the live one); `parts`
-makes them and wires them together.
-
-Subscribers are called on the sense thread (or on the thread calling `label_unknown`, `retrain`,
-`arm`…): they must be quick and must not call back into `start`/`stop`. A front end posts the
-event to its own loop.
-
-Faults (a device gone, no frame, a corrupt replay file, a prediction that fails) are reported once
-as `DeviceStatus(ok=False)` or `ErrorEvent`, and the engine carries on with the other senses,
-reopening a failed device every `reopen_seconds`.
-"""
+One sense thread takes audio blocks into a ring (`loop.Hearing`) that cuts 5 s windows to be judged
+(`judging`), lets the fusion policy tick and grabs a picture (`loop.Sight`) when the policy wants
+one; so the events are a pure function of the input (a `ManualClock` demo is the same everywhere).
+Subscribers are called on that thread (or the caller's: `label_unknown`, `retrain`, `arm`…): they
+must be quick and not call `start`/`stop`. Faults are reported once (`DeviceStatus(ok=False)`,
+`ErrorEvent`); the other senses carry on, a failed device reopened every `reopen_seconds`."""
 
 from __future__ import annotations
 
@@ -71,37 +55,11 @@ NO_MODEL = (
 class Engine(ArmCommands):
     """Senses → recognisers → fusion → decisions (→ poses → arm), as events to subscribers.
 
-    Parameters
-    - `audio`, `camera`: an `AudioSource` / `FrameSource` (see `servant_core.capture.source`),
-      or None for a sense that is absent.
-    - `acoustic`, `visual`: fitted recognisers (see `servant_core.recognisers.base`), or None.
-    - `samples`: {sense: `SampleSource`} for the sample senses (`servant_core.senses`: motion,
-      ambient), and `sample_recognisers`: {sense: fitted recogniser} to judge their windows.
-    - `fusion`: a `FusionPolicy` (default: the paper's `SequentialFusion`).
-    - `clock`: the engine's time in seconds (default: monotonic seconds since construction).
-    - `window_seconds`: the window the acoustic recogniser judges (default: its own, else 5 s).
-    - `library_root`: where `label_unknown` writes (default `data_dir()/"library"`).
-    - `fresh_methods`: {sense: method} a retrain fits for a sense that has no recogniser yet
-      (a first start, before anything was taught); default `FRESH_METHODS`.
-    - `model_path`: the model file the recognisers came from. After a retrain or a fold-in the
-      updated recognisers are saved back to it (atomically), so what the user taught survives a
-      restart; None (the demo, or no model) keeps updates in memory only.
-    - `confidence_threshold`: percent; the arm does not act on a decision less sure than this
-      that the wearer is in its scene and not somewhere else (`fusion.elsewhere`; with no sense
-      that knows elsewhere, the less sure sense's share) (None: no threshold of the engine's own).
-    - `smoother`: a `SceneSmoother` that filters consecutive windows' probabilities, so that one
-      odd window does not flip the scene (recognisers in percent that know no elsewhere; None:
-      each window alone). It starts afresh whenever the acoustic recogniser changes. A sound
-      recogniser that knows elsewhere is held steady by `steady_open` instead (two windows in a
-      row name a place; a place named stays while two windows give it half on average).
-    - `ask_after_s`: "What is this place?" (`UnknownScene` for the sound) once the sound has
-      named no taught place for this long; its label is for all those windows (one recording
-      of them in the library, each window learned).
-
-    Public API used by front ends: `subscribe`, `start`, `stop`, `running`, `join`, `run_until`,
-    `status`, `audio_rate`, `record_window`, `take_picture`, `latest_scores`, `retrain`,
-    `retrain_needed`, `label_unknown`, `set_arm`, `connect_arm`, `arm`, `disarm`, `link`,
-    `pose_for`, `set_action_learner`, `apply_settings`, `note`.
+    Keyword-only parameters, each described beside it in `__init__`. Public API used by front ends:
+    `subscribe`, `start`, `stop`, `running`, `join`, `run_until`, `status`, `audio_rate`,
+    `record_window`, `take_picture`, `latest_scores`, `retrain`, `retrain_needed`, `label_unknown`,
+    `set_arm`, `connect_arm`, `arm`, `disarm`, `link`, `pose_for`, `set_action_learner`,
+    `apply_settings`, `note`.
     """
 
     # kept by its parts, used by front ends and tests as the engine's own
@@ -128,23 +86,48 @@ class Engine(ArmCommands):
     def __init__(
         self,
         *,
+        # an `AudioSource` / `FrameSource` (`servant_core.capture.source`), or None for a sense
+        # that is absent
         audio: AudioSource | None = None,
         camera: FrameSource | None = None,
+        # fitted recognisers (`servant_core.recognisers.base`), or None
         acoustic: Recogniser | None = None,
         visual: Recogniser | None = None,
+        # a `FusionPolicy` (default: the paper's `SequentialFusion`)
         fusion: FusionPolicy | None = None,
+        # the engine's time in seconds (default: monotonic seconds since construction)
         clock: Callable[[], float] | None = None,
+        # the window the acoustic recogniser judges (default: its own, else 5 s)
         window_seconds: float | None = None,
         spectrum_fps: float = SPECTRUM_FPS,
         spectrum_size: int = SPECTRUM_SIZE,
         reopen_seconds: float = 2.0,
+        # where `label_unknown` writes (default `data_dir()/"library"`)
         library_root: str | Path | None = None,
+        # the model file the recognisers came from: after a retrain or a fold-in the updated
+        # recognisers are saved back to it (atomically), so what the user taught survives a
+        # restart; None (the demo, or no model) keeps updates in memory only
         model_path: str | Path | None = None,
+        # {sense: method} a retrain fits for a sense that has no recogniser yet (a first start,
+        # before anything was taught); default `FRESH_METHODS`
         fresh_methods: Mapping[str, str] | None = None,
+        # percent; the arm does not act on a decision less sure than this that the wearer is in
+        # its scene and not somewhere else (`fusion.elsewhere`; with no sense that knows
+        # elsewhere, the less sure sense's share) (None: no threshold of the engine's own)
         confidence_threshold: float | None = None,
+        # filters consecutive windows' probabilities, so that one odd window does not flip the
+        # scene (recognisers in percent that know no elsewhere; None: each window alone); it
+        # starts afresh whenever the acoustic recogniser changes. A sound recogniser that knows
+        # elsewhere is held steady by `steady_open` instead (two windows in a row name a place;
+        # a place named stays while two windows give it half on average)
         smoother: SceneSmoother | None = None,
+        # {sense: `SampleSource`} for the sample senses (`servant_core.senses`: motion, ambient),
+        # and {sense: fitted recogniser} to judge their windows
         samples: Mapping[str, SampleSource] | None = None,
         sample_recognisers: Mapping[str, Recogniser] | None = None,
+        # "What is this place?" (`UnknownScene` for the sound) once the sound has named no taught
+        # place for this long; its label is for all those windows (one recording of them in the
+        # library, each window learned)
         ask_after_s: float = ASK_AFTER_S,
     ) -> None:
         self.audio = audio

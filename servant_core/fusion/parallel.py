@@ -1,25 +1,11 @@
 """Parallel fusion (the paper's future work): hear and look at the same time.
 
-Pictures are taken every `picture_interval_s` all the time, not only after a sound, and each
-5 s window's acoustic prediction replaces the previous one. A scene is decided as soon as the
-latest acoustic prediction names it with at least `min_acoustic_confidence` and, among the
-pictures of the last `confirm_window_s`, it has at least `votes_needed` votes and more than
-any other scene (unknown pictures do not vote). Because the scene must lead the vote, a stray
-picture cannot confirm a wrong sound, so two votes are enough where the sequential policy asks
-for three in a row: a decision typically comes 5–6 s after entering a scene (bench/
-fusion_latency.py). If nothing agrees within `acoustic_window_s` of the first acoustic
-prediction, it says `No scene detected`, forgets, and goes on, as the paper's policy does.
-
-When the sound knows somewhere else (its recogniser learned a background: the engine passes its
-probabilities of the taught places with `scores=`; what they leave is somewhere else's), the
-pictures are evidence rather than votes: the scene is decided once, with at least `votes_needed`
-pictures of the last `confirm_window_s` seen, the probability that the wearer is in it and not
-somewhere else, from the sound and those pictures' average shares
-(`fusion.elsewhere.place_probability`), reaches `OPEN_DECIDE_AT`. Pictures that cannot tell the
-taught places apart (two places, every picture 50 %) then neither block a place the sound is sure
-of nor confirm one it is not; the decision's confidence is that probability, which the arm's
-threshold reads too.
-"""
+Pictures are taken every `picture_interval_s`; each window's sound prediction replaces the last. A
+scene is decided once the latest sound names it with `min_acoustic_confidence` and it leads the
+last `confirm_window_s`'s picture votes with at least `votes_needed` (unknown pictures do not vote).
+When the sound knows somewhere else (`scores=`), the scene is decided once
+`fusion.elsewhere.place_probability` of the sound and those pictures reaches `OPEN_DECIDE_AT`. With
+no agreement within `acoustic_window_s`, it says `No scene detected`, forgets and goes on."""
 
 from __future__ import annotations
 

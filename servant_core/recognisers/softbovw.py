@@ -1,26 +1,11 @@
 """`softbovw`: K-Means visual and colour words, soft-encoded, with a discriminative head.
 
-1. Each picture's central square gives a dense grid of blocks (`features.descriptors`): a unit-
-   length gradient-orientation descriptor and the L*a*b* colour of each of the block's four cells;
-   beside them, the whole square's hue × saturation × value histogram.
-2. Two codebooks are learned by K-Means on the training blocks: visual words (spherical K-Means
-   on the gradient descriptors) and colour words (K-Means on the cell colours).
-3. Each block is encoded softly against every word, by Coates & Ng's "triangle" activation
-   max(0, mean distance − distance to the word): near words fire, far ones stay silent, so a
-   block between two words counts for both instead of flipping to one. Activations are averaged
-   over the whole picture and over a grid of regions (a spatial pyramid: the sky is up).
-4. A multinomial logistic regression over the standardised encodings and the square-rooted HSV
-   histogram gives calibrated probabilities; its regularisation is chosen by stratified
-   cross-validation inside the training pictures (one-standard-error rule). Each training
-   picture is also learned from as its mirror image (a café seen from its other side is still a
-   café), computed from the block descriptors themselves (`mirrored`): no picture is kept.
-5. Open set: one centroid per scene in the standardised encoding space, with its spread
-   (`SceneCentroids`); a picture farther than the training pictures' own distances (times a
-   margin) from every centroid is "unknown place".
-
-`fold_in` keeps the codebooks and the regularisation and refits the head with the new rows
-(the training encodings are kept in the model for that: a few megabytes).
-"""
+A picture's central square: dense blocks (`features.descriptors`) triangle-encoded against K-Means
+visual and colour words, averaged over the picture and a spatial pyramid, and an HSV histogram; a
+multinomial logistic head over them (regularisation by stratified cross-validation, one-standard-
+error rule; pictures also learned mirrored, `mirrored`). A picture farther than the training
+pictures' own distances (times a margin) from every place's centroid is "unknown place". `fold_in`
+keeps the codebooks and the regularisation and refits the head with the new rows."""
 
 from __future__ import annotations
 
