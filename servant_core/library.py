@@ -40,11 +40,8 @@ from servant_core.storage import (
 # damaged or hostile (a 1 MB PNG can claim gigabytes). Checked before decoding.
 MAX_PICTURE_PIXELS = 50_000_000
 MAX_PICTURE_BYTES = 64 * 1024 * 1024
-# The windows of sound teach mode asks for a place: six presses of *Record 5 s*, 30 s. On the
-# wearer's walk (bench/wearer_day.py, six draws, the same later windows) a place taught 30 s got a
-# right move in more of its later windows than one taught 15 s with 2, 3 and 5 places taught;
-# wrong moves at places never taught fell with two and rose with three and five
-# (docs/research.md, issue 21, eighth session).
+# The windows of sound teach mode asks for a place: six presses of *Record 5 s*, 30 s
+# (docs/research.md).
 TEACH_WINDOWS = 6
 # One-window recordings of a place (teach mode's presses, windows labelled live) made no more than
 # this apart are one visit (`visits_of`).

@@ -1,22 +1,11 @@
 """Motion and ambient recordings as CSV files: read (as phone sensor-logger apps export them),
 written (as teach mode keeps them), and replayed as a `SampleSource`.
 
-A file has a header row and one row per reading: a time column and one column per channel.
-
-- Motion (`*.imu.csv`): time, ax, ay, az (m/s²), gx, gy, gz (deg/s).
-- Ambient (`*.ambient.csv`): time, lux, celsius, hpa.
-
-Header spellings of the common apps are accepted, compared without case, spaces, punctuation
-and the unit in brackets: `accX`, `acc_x`, `Acceleration x (m/s^2)`, `gyroX`, `rotationRateX`,
-`Illuminance (lx)`, `Temperature`, `Pressure (hPa)`... (`ALIASES`). A unit in brackets
-converts: acceleration in g, rotation in rad/s, pressure in Pa or kPa. Time is in seconds, or in
-ms or ns when the header says so (`time_ns`, `Time (ms)`); without a unit, steps of 10⁴ or more
-are nanoseconds (phone loggers stamp with the system's nanosecond clock).
-
-Readings are resampled onto a uniform grid at the sensor rate (phones log with jitter); a pause
-longer than `MAX_GAP_S` splits the file rather than being bridged by a straight line. Rows that
-do not parse are skipped and counted; a file with no usable rows is one `ServantError`.
-"""
+A header row, then a row per reading: time, then the channels. Motion (`*.imu.csv`): ax, ay, az
+(m/s²), gx, gy, gz (deg/s); ambient (`*.ambient.csv`): lux, celsius, hpa. Common apps' headers are
+accepted (`ALIASES`) and a unit in brackets converts. Readings are resampled onto a uniform grid at
+the sensor rate; a pause over `MAX_GAP_S` splits the file. Rows that do not parse are skipped and
+counted; a file with no usable rows is one `ServantError`."""
 
 from __future__ import annotations
 

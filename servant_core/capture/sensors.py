@@ -1,21 +1,11 @@
 """The sensor board on a serial port: motion (an MPU-6050) and ambient values, as text lines.
 
-The board is an Arduino running `docs/sensor_board.ino`; the line format is documented in
-`docs/sensors.md`. One port carries both streams, one line per reading, ASCII, `\\n`-ended:
-
-    I,<ms>,<ax>,<ay>,<az>,<gx>,<gy>,<gz>     acceleration m/s², rotation deg/s (IMU_RATE a second)
-    A,<ms>,<lux>,<celsius>,<hPa>             light, temperature, pressure (AMBIENT_RATE a second)
-    # anything                               a comment (the sketch's banner); ignored
-
-`<ms>` is the board's `millis()`: `SensorBoard.measured_rate` gives the rate the stamps show,
-to check against the rate the source assumes. A line that does not parse (line noise, a half
-line after a reset) is skipped and counted in `SensorBoard.bad_lines`, never a fault. A port
-that vanishes (the USB cable pulled) is a `ServantError` in one line; the sources are live, so
-the engine reopens them later.
-
-`SensorBoard(port)` owns the port; `board.source("imu")` and `board.source("ambient")` are the
-two `SampleSource`s over it, which may be read from different threads.
-"""
+An Arduino running `docs/sensor_board.ino` sends ASCII lines (`docs/sensors.md`):
+`I,<ms>,<ax>,<ay>,<az>,<gx>,<gy>,<gz>` (m/s², deg/s), `A,<ms>,<lux>,<celsius>,<hPa>`, `# comment`.
+`SensorBoard(port)` owns the port; `board.source("imu")` and `board.source("ambient")` are
+`SampleSource`s over it, readable from different threads; `measured_rate` is the stamps' rate. A
+line that does not parse is skipped and counted (`bad_lines`), never a fault; a vanished port is
+one `ServantError`."""
 
 from __future__ import annotations
 

@@ -1,20 +1,10 @@
 """Synthesised motion (an MPU-6050 worn on the body) and ambient values for the demo's scenes.
 
-Motion is (n, 6) at the sensor rate: acceleration in m/s² (gravity included, in a body
-orientation drawn per window: the sensor is not worn level) and rotation in deg/s.
-
-- sitting (the coffee shop): near still; now and then a hand moves the cup (a smooth bump of a
-  second or so).
-- walking (the street): steps at a cadence of 1.6–2.0 Hz, a vertical bounce with its second
-  harmonic, a sway at half the cadence.
-- bouncing (the basketball gym): dribbling and jumping, 2.2–3.0 Hz, hard landings (sharp peaks),
-  large rotations.
-- vehicle (a bus or a car, no demo scene yet): still but shaken by 10–18 Hz engine and road
-  vibration, with slow sways in the turns.
-
-Ambient values are (n, 3): lux, °C, hPa, each place with its own light and warmth; the pressure
-shares a slowly drifting weather level across places (it says nothing about the place unless one
-climbs). Everything is deterministic by the generator passed in.
+Motion is (n, 6) at the sensor rate: acceleration in m/s² (gravity included, the body's
+orientation drawn per window) and rotation in deg/s, for sitting (the coffee shop), walking (the
+street), bouncing (the basketball gym) and vehicle (no demo scene yet). Ambient values are (n, 3):
+lux, °C, hPa, each place with its own light and warmth, the pressure a weather level shared across
+places. Everything is deterministic by the generator passed in.
 """
 
 from __future__ import annotations

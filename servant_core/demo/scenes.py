@@ -1,17 +1,10 @@
 """The demo's scenes and its walk: a coffee shop, a basketball gym and a street, all synthesised.
 
-Everything is deterministic by seed: training windows and pictures come from
-`numpy.random.default_rng([seed, TRAIN, ...])`, the walk's windows and pictures from
-`default_rng([seed, WALK, ...])`, so training and walk never share a sound or a picture.
-
-The demo's audio runs at `DEMO_RATE` (16 kHz), and its paper recogniser is trained at that rate:
-the paper's raw-FFT K-Means on 5 s windows at 44.1 kHz would make start-up take far longer for
-no gain on synthesised sound. The paper's method is otherwise unchanged.
-
-The walk (`WALK`, 95 s, then again): the coffee shop, the gym, then a street heard while the camera
-still shows the café (a mismatch that ends in "No scene detected" after the paper's 30 s), then
-the street. The camera turns to a new place one window (5 s) after the sound changes: the paper's
-policy judges a window after it ends, so each clean change of place confirms at once.
+Deterministic by seed: training from `default_rng([seed, TRAIN, ...])`, the walk from
+`default_rng([seed, WALK, ...])`, never sharing a sound or a picture. Audio runs at `DEMO_RATE`
+(16 kHz), the paper's method trained at that rate. The walk (`WALK`, 95 s, repeated): the coffee
+shop, the gym, a street heard while the camera still shows the café (ending in "No scene detected"
+after 30 s), then the street; the camera turns one window (5 s) after the sound changes.
 """
 
 from __future__ import annotations

@@ -68,12 +68,11 @@ def build_demo_engine(
     """The built-in demo: recognisers trained on freshly synthesised scenes (a couple of seconds),
     then the synthesised walk (`servant_core.demo.scenes`). By default the fresh methods, smoothed,
     with the parallel policy; `paper`: the paper's recognisers (eqs. 1 and 2) and its sequential
-    policy; `policy` names another ("learned" first teaches its net on the demo's library).
-    `arm`: an emulated arm, disarmed. `library_root`: where the demo's training scenes are written
-    as a library (not with `write_library=False`; a place labelled still goes there).
-    `on_progress(done, total)` follows the training. `realtime=False` runs the walk as fast as
-    possible on a `ManualClock` (pass your own to read it), the same events, times included, on
-    every run; `realtime=True` plays it at real speed on `clock` (default: monotonic time)."""
+    policy; `policy` names another ("learned" first teaches its net on the demo's library). `arm`:
+    an emulated arm, disarmed. `library_root`: where the training scenes are written (not with
+    `write_library=False`; a place labelled still goes there). `on_progress(done, total)` follows
+    the training. `realtime=False` runs the walk as fast as possible on a `ManualClock` (pass your
+    own to read it), the same events on every run; `realtime=True` at real speed on `clock`."""
     from servant_core.demo.scenes import DemoCamera, demo_audio
     from servant_core.demo.sensors import demo_sensor_sources, train_sensor_recognisers
 
@@ -200,13 +199,10 @@ def steady() -> SceneSmoother:
 def pose_for_taught(learner: Any) -> PoseFor:
     """The engine's action hook for an `ActionLearner`: the pose taught for the decided scene.
 
-    The learner is asked for the decided scene as a certainty (one-hot scores), not for the
-    senses' raw scores: those are never one-hot, and a wearer who taught "cup at chest height"
-    for the café wants that pose, not a blend with the street's. The engine has applied the
-    confidence threshold of the settings (which the user may change while it runs) before it
-    asks, so the learner's own, fixed when it was trained, is not applied a second time. A
-    place it was never taught a pose for (one named by its answer to "What is this place?") has
-    none: None, which the engine says once."""
+    The learner is asked for the decided scene as a certainty (one-hot scores), not a blend of the
+    senses' raw scores, and without its own confidence threshold (the engine has applied the
+    settings'). A place it was never taught a pose for has none: None, which the engine says once.
+    """
 
     def pose_for(scene: str, scores: dict[str, dict[str, float]], confidence: float) -> Pose | None:
         if scene not in getattr(learner, "taught_scenes_", (scene,)):
@@ -227,32 +223,28 @@ def live_policy(name: str, config: FusionConfig, net: FusionNet | None = None) -
 
 @dataclass(frozen=True)
 class LiveSettings:
-    """What `build_live_engine` needs; every field has a sensible default.
+    """What `build_live_engine` needs; every field has a sensible default, described beside it."""
 
-    `model`: a model file from `servant train` (None: no recognisers, senses only).
-    `model_path`: where retrains and fold-ins are saved (None: back to `model`).
-    `microphone`: device index or name (None: the default input); `rate`: None for its default.
-    `camera`: index, video file or image-sequence pattern (None: no camera).
-    `user`: the user's settings (`servant_core.settings.Settings`: fusion windows, confidence
-    threshold, the arm's port, protocol and joints); None: the defaults, and no arm.
-    `policy`: the fusion policy's name (`servant_core.fusion.POLICIES`).
-    `learner`: the action learner file teach mode trains (None: `default_learner_path()`, if
-    there is one yet).
-    `sensors`: {stream: the sensor board's serial port, a log or a folder of logs} for the
-    sample senses (`servant_core.senses`: "imu" for motion, "ambient"); a stream left out is not
-    used.
-    """
-
+    # a model file from `servant train` (None: no recognisers, senses only)
     model: str | Path | None = None
+    # where retrains and fold-ins are saved (None: back to `model`)
     model_path: str | Path | None = None
+    # device index or name (None: the default input); `rate`: None for its default
     microphone: int | str | None = None
     rate: int | None = None
     use_microphone: bool = True
+    # index, video file or image-sequence pattern (None: no camera)
     camera: int | str | None = 0
     library_root: str | Path | None = None
+    # the user's settings (`servant_core.settings.Settings`: fusion windows, confidence threshold,
+    # the arm's port, protocol and joints); None: the defaults, and no arm
     user: Any = None
+    # the fusion policy's name (`servant_core.fusion.POLICIES`)
     policy: str = DEFAULT_POLICY
+    # the action learner file teach mode trains (None: `default_learner_path()`, if there is one)
     learner: str | Path | None = None
+    # {stream: the sensor board's serial port, a log or a folder of logs} for the sample senses
+    # (`servant_core.senses`: "imu" for motion, "ambient"); a stream left out is not used
     sensors: Mapping[str, str] = dataclasses.field(default_factory=dict)
 
 

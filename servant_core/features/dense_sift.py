@@ -1,18 +1,10 @@
 """Dense SIFT: SIFT descriptors on a regular grid of a picture, at a few scales (pure functions).
 
-OpenCV's `SIFT.compute` on a grid of keypoints costs about 0.17 ms a keypoint (it builds a scale
-pyramid and samples each patch on its own): some 100 ms for a picture's 700 patches. A dense grid
-allows the shortcut of VLFeat's `dsift` instead: the picture's gradients are binned once into
-8 orientation channels, each channel is pooled once over the whole picture with the bilinear
-(triangular) cell weighting of SIFT, and every patch's 4×4 cells are then read off the pooled
-maps. Per patch that is the SIFT descriptor with a Gaussian weight per cell rather than per pixel.
-
-A picture is centre-cropped to a square and shrunk to `size`×`size` pixels (as the other picture
-methods do: a 640×480 camera frame and a 128×128 library picture give the same grid). For each
-cell width `b` in `bin_sizes` the patches are 4b pixels wide and one lies every `step` pixels.
-Each descriptor is made SIFT's way (unit length, clipped at 0.2, unit length again) and then
-RootSIFT (Arandjelović & Zisserman 2012: L1-normalised, square-rooted), whose Euclidean distance
-is the Hellinger kernel of the histograms.
+VLFeat's `dsift` shortcut: gradients binned once into 8 orientation channels, each pooled once with
+SIFT's bilinear cell weighting, every patch's 4×4 cells read off the pooled maps (a Gaussian weight
+per cell, not per pixel). A picture is centre-cropped to a square of `size`×`size` pixels; for each
+cell width `b` in `bin_sizes` patches are 4b pixels wide, one every `step` pixels. Descriptors are
+SIFT-normalised (unit length, clipped at 0.2, unit length) then RootSIFT (L1, square root).
 """
 
 from __future__ import annotations

@@ -1,17 +1,10 @@
 """Dense local descriptors of a picture: gradient-orientation blocks and their colours.
 
-A picture is centre-cropped to a square and shrunk to `size`×`size` pixels (a 640×480 camera
-frame and a 128×128 library picture then give the same grid), cut into `cell`×`cell` cells, and
-every 2×2 block of cells (overlapping, one cell apart) is described by:
-
-- its gradient orientations: a histogram of `n_bins` unsigned orientations per cell, weighted by
-  gradient magnitude, the four cells concatenated and scaled to unit length (HOG-like, so that
-  lighting contrast cancels);
-- its colour: the block's mean CIE L*a*b* colour (L in 0–100, a and b about ±100).
-
-These are what the `bovw` and `softbovw` methods' K-Means codebooks are learned from
-(`softbovw` keeps the colour of each of the block's four cells, a small colour layout). Beside
-them, a whole-picture hue × saturation × value histogram (`hsv_histogram`).
+A picture is centre-cropped to a square, shrunk to `size`×`size`, cut into `cell`×`cell` cells;
+every 2×2 block of cells (one cell apart) gives a unit-length HOG-like histogram of `n_bins`
+unsigned orientations per cell (magnitude-weighted) and its mean CIE L*a*b* colour (L 0–100, a
+and b about ±100). `bovw` and `softbovw` learn their codebooks from these; beside them, a
+whole-picture hue × saturation × value histogram (`hsv_histogram`).
 """
 
 from __future__ import annotations

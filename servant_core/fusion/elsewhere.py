@@ -1,20 +1,10 @@
 """How sure the senses together are that the wearer is in a taught place and not somewhere else.
 
-A sense whose recogniser knows somewhere else (it learned a background: `open_proba`) gives each
-taught place the probability that the wearer is there *and not elsewhere*; the rest of its
-probability is "elsewhere". A sense that knows only the taught places (the pictures, motion,
-ambient: nothing of somewhere else was ever shown to them) gives shares among the taught places;
-it can say which taught place a moment looks like, not whether it is one. Together, as a naive
-Bayes product with the senses independent given the place:
-
-    P(s | senses) ∝ Π_open p_k(s) · Π_closed K·q_k(s)      for each taught place s
-    P(elsewhere | senses) ∝ Π_open p_k(elsewhere) · 1
-
-where K·q_k(s) is a closed sense's likelihood ratio of s against the average taught place. A
-closed sense that cannot tell the places apart (two places, a picture at 50 %) is K·q = 1: it
-changes nothing, rather than making every picture "50 % sure"; nor does one that was never taught
-the place at all (a place labelled from its sound alone). With no open sense at all the old rule
-stands: the least sure sense's share.
+An open sense (`open_proba`) gives each taught place P(there and not elsewhere), the rest being
+elsewhere; a closed sense gives shares among the taught places. Naive Bayes, senses independent:
+    P(s | senses) ∝ Π_open p_k(s) · Π_closed K·q_k(s);   P(elsewhere | senses) ∝ Π_open p_k(else)
+K·q_k(s) is a closed sense's likelihood ratio of s against the average taught place (1: no
+change). With no open sense, the least sure sense's share.
 """
 
 from __future__ import annotations
@@ -130,21 +120,12 @@ def steady_open(
 ) -> tuple[str | None, dict[str, float]]:
     """What a sense that knows somewhere else says of a window, held steady (pure).
 
-    - Arriving: each taught place gets the smaller of its probability in this window and in the
-      one before, so a place is named when two windows in a row say so: neither one odd window
-      nor the last place, lingering in the first window of the next, can name a place alone,
-      unless that window is sure of it (below).
-    - Staying: the place named at the window before (`named_before`) stays named while it is
-      still this window's likeliest and the two windows give it half or more on average: one
-      odd window at a place the wearer is in (a door, a voice close by) does not unname it for
-      two windows (on bench/wearer_day.py, taught places' right moves 0.838 → 0.86 with five
-      places: docs/research.md, issue 21). Its held probability is that average.
-    - Arriving sure: where two windows do not name a place, this window alone names its likeliest
-      place when it gives it `sure_alone` or more and is not `far_alone` from every taught place
-      (None: never). The wearer's arm moves one window sooner where the sound is sure.
-
-    Returns (the place, or None where somewhere else keeps half the probability or more, or the
-    window is `far` from every taught place; the held probabilities)."""
+    Arriving: each place gets the smaller of its probability in this window and `previous`. Staying:
+    `named_before` stays while it is this window's likeliest and the two give it half or more on
+    average (held at that average). Arriving sure: else this window's likeliest place when it has
+    `sure_alone` or more and is not `far_alone` (None: never). Returns (the place, or None where
+    somewhere else keeps half or more or the window is `far`; the held probabilities).
+    """
     scores = {s: min(window.get(s, 0.0), previous.get(s, 0.0)) for s in window}
     if far or not scores:
         return None, scores

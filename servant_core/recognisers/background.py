@@ -1,18 +1,10 @@
 """The universal background: many places that are not the wearer's, shipped with Servant.
 
-A recogniser that compares only the places a wearer taught gives every window to one of them:
-with two places taught, a building site is "the café" or "the street". The likelihood-ratio idea
-of GMM-UBM speaker verification answers that: a taught place is scored against a background of
-many other places, and the probability that the wearer is *here and not somewhere else* is
-what the arm acts on.
-
-`background_audio.npz` (beside this module) holds level-free log-mel windows of such places,
-quantised to bytes: windows of the Moodist ambient sound set (Pixabay Content License / CC0,
-which Servant may redistribute) and noises Servant synthesises itself. It is written once by
-`scripts/fit-background` and read by `load_background`; a recogniser featurizes nothing of it
-again, it only describes the frames through its own codebooks. Each window keeps the name of
-its recording, so that a recording a wearer taught (or that an evaluation tests on) is never
-also "somewhere else" (`exclude`).
+A taught place is scored against this background (as in GMM-UBM speaker verification), so that the
+arm acts on the probability of *here and not somewhere else*. `background_audio.npz` (beside this
+module, written by `scripts/fit-background`, read by `load_background`) holds level-free log-mel
+windows quantised to bytes, each with its recording's name: a recording taught or tested on is
+left out (`exclude`). Recognisers describe its frames through their own codebooks.
 """
 
 from __future__ import annotations

@@ -1,21 +1,11 @@
 """What every recogniser is, and the pieces they share: labelling clusters, spreads, probabilities.
 
-A recogniser is a scikit-learn-style estimator for one sense (`"audio"` or `"image"`):
-
-- `featurize(items)`: stateless, depends only on the parameters. Audio: windows, a float32
-  array (n, samples) at `self.rate`. Image: a list of BGR uint8 pictures. Returns (n, ...).
-- `fit(X, scenes)` on featurized rows, returns `self`; learned attributes end in `_`;
-  `scenes_` lists the scenes in the column order of `predict_proba`.
-- `predict(X)` → str array, `UNKNOWN` where no scene can be named;
-  `confidence(X)` → a number whose unit `confidence_unit` names: `PERCENT` (a probability in
-  percent) or, in paper mode, the paper's formula ("eq. 1", "eq. 2"), which is no percentage;
-  `predict_proba(X)` → (n, len(scenes_)) rows summing to one: the shares among the taught
-  places. A recogniser that knows somewhere else (a background) also has `open_proba(X)`: the
-  probability of each taught place *and not somewhere else*, rows summing to at most one
-  (`open_probabilities` reads either).
-- `get_state()` → (JSON-able header, dict of arrays); `from_state(header, arrays)` rebuilds it.
-  That is how models are saved without pickle (see `servant_core.modelfile`).
-"""
+A recogniser is a scikit-learn-style estimator for one sense: stateless `featurize(items)` →
+(n, ...); `fit(X, scenes)` → `self`, learned attributes ending in `_`, `scenes_` in
+`predict_proba`'s column order; `predict(X)` (`UNKNOWN` where none), `confidence(X)` in
+`confidence_unit`, `predict_proba(X)` (rows sum to one); `open_proba(X)` when it knows somewhere
+else (rows sum to at most one); `get_state()` / `from_state(header, arrays)`, saved without
+pickle (`servant_core.modelfile`)."""
 
 from __future__ import annotations
 
@@ -44,10 +34,15 @@ class Recogniser(Protocol):
         reads it from its centroids, which a fold-in can extend)."""
         ...
 
+    # Stateless, depends only on the parameters. Audio: windows, a float32 array (n, samples) at
+    # `self.rate`; image: a list of BGR uint8 pictures. Returns (n, ...).
     def featurize(self, items: Any) -> np.ndarray: ...
     def fit(self, X: np.ndarray, scenes: Sequence[str] | np.ndarray) -> Self: ...
     def predict(self, X: np.ndarray) -> np.ndarray: ...
+    # A number whose unit `confidence_unit` names: `PERCENT` (a probability in percent) or, in
+    # paper mode, the paper's formula ("eq. 1", "eq. 2"), which is no percentage.
     def confidence(self, X: np.ndarray) -> np.ndarray: ...
+    # (n, len(scenes_)) rows summing to one: the shares among the taught places.
     def predict_proba(self, X: np.ndarray) -> np.ndarray: ...
     def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]: ...
 

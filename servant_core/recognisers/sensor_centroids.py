@@ -1,17 +1,10 @@
 """`kmeans` for the motion and ambient senses: per-scene K-Means over a window's few features.
 
-A window of sensor readings (n, channels) becomes a short feature vector (`features.motion`,
-`features.ambient`). The vectors are standardised and, with 20 training windows a scene or
-more, projected on the directions that separate the scenes (shrunk LDA, `discriminant`: some
-features, such as the pressure's jitter, are mostly noise and would otherwise weigh as much as
-the light). Each scene's vectors are clustered by K-Means into a few centroids with their own
-spreads (`SceneCentroids`, the head the sound and picture methods share): probabilities come
-from distances, and a window far from every centroid is an unknown place.
-
-The probabilities are calibrated: spreads measured on the rows the centroids were fitted on
-misjudge windows never seen, so one factor on all spreads is chosen to minimise the log-loss of
-held-out rows (stratified folds of the training set). With fewer than three rows of a scene
-nothing can be held out, and the factor stays 1.
+A window of readings (n, channels) becomes a short vector (`features.motion`, `features.ambient`),
+standardised and, with 20 training windows a scene or more, projected by shrunk LDA
+(`discriminant`). Each scene's vectors are a few K-Means centroids with their spreads
+(`SceneCentroids`): probabilities from distances, a window far from every centroid unknown. One
+factor on all spreads minimises held-out log loss (stratified folds; 1 below three rows a scene).
 """
 
 from __future__ import annotations
