@@ -1,16 +1,10 @@
 """Which of the engine's events a log says, for every front end: `servant run --headless`'s
 lines and the TUI's log both ask a `LogNews`, so that they cannot disagree.
 
-A state that holds is said when it begins, not at every window it holds: the parallel policy
-decides again at every window the wearer stays (`CoffeeScene detected` every 5 s), and the arm
-reports its state after every pose it is asked to hold. What the events leave unsaid is said too:
-
-- the place decided is left when the sound stops naming a place (somewhere untaught, silence):
-  no policy decides then, and none says so either; the log says `No scene detected` once;
-- a silent window is silence, not an unknown place (`SilenceWatch`).
-
-How each front end words an event is its own (`event_text` holds the words they share); what
-each sense makes of each window is news at every window.
+A state that holds is said when it begins, not at every window it holds. What the events leave
+unsaid is said too: leaving the place decided when the sound stops naming a place (`No scene
+detected`, once), and a silent window as silence, not an unknown place (`SilenceWatch`). Each
+front end words events its own way (`event_text` holds the shared words).
 """
 
 from __future__ import annotations

@@ -1,16 +1,10 @@
 """The senses Servant has, by name, and what the generic parts need to know of each.
 
-A sense is a source (a device or a file replay), features and a recogniser. Sound and pictures
-have their own paths through the engine (spectra, pictures on demand); every other sense is a
-*sample sense*: a stream of readings (n, channels) at a fixed rate, cut into windows of the same
-length as the sound's, each judged by its recogniser. The engine's loop, the scene library, the
-model file, retrain and the TUI work from this registry, so a new sample sense is:
-
-1. its stream on the sensor board (`capture.sensors.STREAMS`) or any `SampleSource`, its
-   features and its recogniser class (a `recognisers.base.Recogniser` whose `sense` is the
-   sense's name);
-2. one line in `SENSES` below, naming them: `recognisers` registers the recogniser from it
-   (`"module:Class"`, imported when the recognisers are, as an entry point would be).
+Sound and pictures have their own paths through the engine; every other sense is a *sample
+sense*: readings (n, channels) at a fixed rate, cut into windows as long as the sound's, each judged
+by its recogniser. The engine's loop, the library, the model file, retrain and the TUI work from
+this registry: a new sample sense is its stream (`capture.sensors.STREAMS` or any `SampleSource`),
+features and recogniser class (`sense` = its name), and one line in `SENSES` (`"module:Class"`).
 """
 
 from __future__ import annotations

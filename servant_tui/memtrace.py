@@ -1,15 +1,10 @@
 """A developer option to find what makes a long-running TUI grow: `SERVANT_MEMTRACE=FILE`.
 
 With it set, `servant` (and `servant demo`) starts `tracemalloc` and a daemon thread that appends
-to FILE every `SERVANT_MEMTRACE_EVERY` seconds (default 60), the first time after
-`SERVANT_MEMTRACE_AFTER` seconds (default the same; set it past the warm-up): resident memory
-(VmRSS), the memory tracemalloc sees Python's allocators hand out, the lines and call paths whose
-allocations grew most since the first snapshot, and the object types and `functools.lru_cache`
-entries whose counts grew most (`gc.get_objects`), and glibc's own figures (`mallinfo2`). Resident
-memory growing while traced memory stays flat points at the C allocator (fragmentation) or at
-memory outside Python; traced memory growing names the lines to blame. `SERVANT_MEMTRACE_FRAMES=0`
-leaves tracemalloc off and reports the rest. Tracing costs CPU and memory (every allocation keeps
-its call path), so all this is off unless asked for.
+to FILE every `SERVANT_MEMTRACE_EVERY` seconds (default 60), first after `SERVANT_MEMTRACE_AFTER`
+(default the same): VmRSS, traced memory, the lines, call paths, object types and `lru_cache`
+entries that grew most, and glibc's `mallinfo2`. `SERVANT_MEMTRACE_FRAMES=0` leaves tracemalloc
+off and reports the rest. Off unless asked for: tracing costs CPU and memory.
 """
 
 from __future__ import annotations

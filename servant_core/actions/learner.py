@@ -1,14 +1,10 @@
 """The action learner: a small neural network from what the engine perceived to the pose to take.
 
-Inputs are the acoustic and visual scores of every known scene (in `scenes_` order, acoustic
-first); outputs are the angles of `joints_`. It is scikit-learn's `MLPRegressor`, trained in
-chunks of `report_every` iterations so the training error can be reported as it falls (the
-paper's Fig. 6), on angles standardised per joint.
-
-Persistence: the trained weights and biases go into an `.npz` with a JSON header, and predictions
-run through `perceptron.forward`, a plain numpy pass over those arrays, both before and after
-saving. Loading is instant, needs no pickle, and the arm does exactly what was trained and
-tested: retraining on load would make the pose depend on the installed scikit-learn's numerics.
+Inputs: the acoustic then visual scores of every scene in `scenes_`; outputs: the angles of
+`joints_`. scikit-learn's `MLPRegressor` on per-joint standardised angles, trained in chunks of
+`report_every` iterations so the error is reported as it falls (the paper's Fig. 6). Weights and
+biases are saved in an `.npz` with a JSON header (no pickle), and predictions run through
+`perceptron.forward`, before and after saving: the arm does exactly what was trained and tested.
 """
 
 from __future__ import annotations

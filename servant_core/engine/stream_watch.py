@@ -1,14 +1,10 @@
 """Watching a live sample stream (a sensor board): it stalls, sends only junk, or runs at a rate
 other than the one its windows are cut by.
 
-A board whose sketch hung, or whose baud rate is wrong (every line junk), sends no reading, and
-the Motion pane would freeze without a word; a sketch set to another rate fills windows of the
-wrong length of time (a flood of lines gave 6,288 windows in 12 s, each judged). `StreamWatch`
-turns both into news for the device's status line: a stall after `STALL_SECONDS` without a
-reading, and a rate off by more than `RATE_FACTOR` either way over a `PERIOD_SECONDS` stretch
-(after `WARM_UP_SECONDS`, when what the port buffered before it was opened has come through).
-While the rate is off, the readings are not used: a window of them means another length of time
-than the recogniser learned. The watch is pure bookkeeping on the times it is given.
+`StreamWatch` turns both into news for the device's status line: a stall after `STALL_SECONDS`
+without a reading, and a rate off by more than `RATE_FACTOR` either way over `PERIOD_SECONDS`
+(after `WARM_UP_SECONDS`). While the rate is off, the readings are not used. The watch is pure
+bookkeeping on the times it is given.
 """
 
 from __future__ import annotations

@@ -1,15 +1,10 @@
 """A PyTorch state dict (names → tensors) read into numpy, without torch and without unpickling.
 
-A `.pth` file is pickles around raw tensor bytes, in one of two layouts: torch's legacy stream
-(before 1.6: a magic number, a version and a system-information pickle, the state dict's
-pickle, the list of its storages' keys, then each storage as an element count and its bytes) or
-its zip archive (`<name>/data.pkl` and each storage in `<name>/data/<key>`). A pickle can name
-any Python callable and call it; `pickle.load` would run whatever the file asks. Here the
-pickle's opcodes (`pickletools.genops`, which only decodes them) drive a small stack machine that
-knows the few things a state dict of tensors is made of — strings, numbers, tuples, dicts, an
-`OrderedDict`, a storage reference, `_rebuild_tensor_v2` — and refuses anything else, before
-anything is built. Nothing is imported or called by name; each tensor is a view of its storage's
-bytes, bounds-checked, then copied.
+Both `.pth` layouts are read: torch's legacy stream (before 1.6) and its zip archive. The pickle's
+opcodes (`pickletools.genops`, which only decodes them) drive a small stack machine that knows
+strings, numbers, tuples, dicts, an `OrderedDict`, a storage reference and `_rebuild_tensor_v2`,
+and refuses anything else before anything is built. Nothing is imported or called by name; each
+tensor is a bounds-checked view of its storage's bytes, then copied.
 """
 
 from __future__ import annotations

@@ -1,14 +1,10 @@
 """`bovw`: the visual method beyond the paper, a bag of visual words with colour words.
 
-1. Each picture gives a dense grid of local blocks (`features.descriptors`): a gradient-
-   orientation descriptor and a mean L*a*b* colour per block.
-2. Two codebooks are learned by K-Means over the training blocks: visual words (spherical
-   K-Means on the unit-length gradient descriptors) and colour words (K-Means on the colours,
-   the paper's dominant-colour idea applied to the whole training set).
-3. A picture is described by how often it uses each word, over the whole picture and over each
-   quarter of it (a two-level spatial pyramid), square-rooted (Hellinger).
-4. Each scene's descriptors are clustered into a few centroids with their own spreads
-   (`SceneCentroids`): probabilities from distances, and "unknown place" when far from all.
+A picture's dense blocks (`features.descriptors`: gradient orientations, mean L*a*b* colour) are
+counted against K-Means visual words (spherical, on the gradients) and colour words, over the
+picture and each quarter (a two-level pyramid), square-rooted. Each scene's descriptors are a few
+centroids with their spreads (`SceneCentroids`): probabilities from distances, "unknown place"
+when far from all.
 """
 
 from __future__ import annotations

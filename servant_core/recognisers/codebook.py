@@ -1,14 +1,9 @@
 """`codebook`: the acoustic method beyond the paper, K-Means at its heart twice over.
 
-1. Each 5 s window becomes ~215 log-mel frames over 60 Hz–10.5 kHz (a band every recording
-   has, whatever its sample rate), with the window's mean level removed.
-2. A codebook of sound "shapes" is learned by spherical K-Means over the training frames (each
-   frame centred and scaled to unit length, so only the shape of its spectrum matters: loudness
-   and gain are gone).
-3. A window is described by how often it uses each codeword (a histogram, square-rooted so that
-   Euclidean distance between windows is the Hellinger distance between histograms).
-4. Each scene's window descriptors are clustered by K-Means into a few centroids with their own
-   spreads: probabilities from distances, and "unknown place" when a window is far from all.
+A 5 s window becomes ~215 log-mel frames over 60 Hz–10.5 kHz, mean level removed; spherical
+K-Means over the training frames (each centred, unit length) gives a codebook of sound shapes; a
+window is its square-rooted codeword histogram (Hellinger). Each scene's windows are a few K-Means
+centroids with their spreads: probabilities from distances, "unknown place" when far from all.
 """
 
 from __future__ import annotations

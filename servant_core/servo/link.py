@@ -1,14 +1,10 @@
 """The serial link to the arm's servo controller (pyserial), and the safety rules it enforces.
 
-- Every angle is clamped to its joint's limits before it is encoded; a joint that does not exist
-  or an angle that is not a number is refused.
-- Motion is rate-limited: each `step` moves a joint at most `max_speed_deg_s` times the time since
-  the last step (at most `MAX_STEP_S`, so a late step never becomes a jump). Controllers that
-  have a speed limit (Maestro, SSC-32) are given it as well.
-- Nothing moves unless the link is armed. Any fault of the link (the port lost, no answer, an
-  answer that is not one) disarms it; when a lost port comes back, `reconnect` (also tried by
-  `arm` and `read_positions`) reopens it, still disarmed.
-- A dry run opens no port and hands every command's bytes to `on_bytes` instead.
+Every angle is clamped to its joint's limits before encoding; an unknown joint or a non-number is
+refused. Each `step` moves a joint at most `max_speed_deg_s` times the time since the last (at most
+`MAX_STEP_S`); controllers with a speed limit (Maestro, SSC-32) get it too. Nothing moves unless
+armed; any fault disarms, and `reconnect` (also tried by `arm`, `read_positions`) reopens a lost
+port still disarmed. A dry run opens no port and hands every command's bytes to `on_bytes`.
 """
 
 from __future__ import annotations
