@@ -22,15 +22,11 @@ import numpy as np
 class AudioSource(Protocol):
     """Mono float32 audio in consecutive blocks.
 
-    - `name`: for messages ("microphone 'pulse'", "replay cafe.wav").
-    - `rate`: samples per second of the blocks (known after `open`).
-    - `open()`: acquire the device or file; raises ServantError.
-    - `read(timeout)`: the next block (1-D float32), or None if none came within `timeout`
-      seconds; raises ServantError on a fault (device gone, corrupt file).
-    - `exhausted`: True once a finite source (a replay) has nothing more to give.
-    - `live`: True for a device (a fault closes it and the engine reopens it later); False for a
-      replay (a fault is one bad file, and the replay goes on with the next).
-    - `close()`: release everything; safe to call twice.
+    `name` for messages; `rate` in samples a second (known after `open`); `open()` acquires the
+    device or file; `read(timeout)` → the next 1-D float32 block, or None after `timeout` s;
+    `exhausted` once a replay has nothing more; `live`: a device (a fault closes it, the engine
+    reopens it later), else a replay (a fault is one bad file, the next goes on); `close()` is safe
+    twice. `open` and `read` raise ServantError on a fault (device gone, corrupt file).
     """
 
     name: str
