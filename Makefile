@@ -37,11 +37,13 @@ test: setup
 	@if [ -x $(VMIC) ] && vmic_env=$$(bash $(VMIC) start 2>/dev/null); then eval "$$vmic_env"; fi; \
 	PATH="$(abspath $(VENV))/bin:$$PATH" $(PY) -m pytest -q -p no:cacheprovider --durations=30 -n 2 --dist loadgroup
 
-# The fast lane: the tests without the real data (marked `slow`) and without
-# the devices (marked `devices`: the virtual microphone, tmux, a controller or sensor board
-# emulator in its own process, `servant` in a child process). `make test` runs them all.
+# The fast lane: the tests without the real data (marked `slow`), without the devices (marked
+# `devices`: the virtual microphone, tmux, a controller or sensor board emulator in its own
+# process, `servant` in a child process) and without the integration tests (marked `integration`:
+# the fuzz suites, and tests that train whole models, walk the demo for minutes or wait on an
+# emulated device in real time; tests/conftest.py names them). `make test` runs them all.
 test-fast: setup
-	PATH="$(abspath $(VENV))/bin:$$PATH" $(PY) -m pytest -q -p no:cacheprovider --durations=10 -n 2 --dist loadgroup -m "not slow and not devices"
+	PATH="$(abspath $(VENV))/bin:$$PATH" $(PY) -m pytest -q -p no:cacheprovider --durations=10 -n 2 --dist loadgroup -m "not slow and not devices and not integration"
 
 bench: setup
 	for b in bench/*.py; do $(PY) $$b || exit 1; done

@@ -22,12 +22,12 @@ from servant_core.demo.scenes import (
 from servant_core.engine import build_demo_engine
 from servant_core.events import AcousticPrediction, Decision, SensePrediction, VisualPrediction
 from servant_core.recognisers.base import answers, open_predict, open_probabilities
-from tests.conftest import servant
+from tests.conftest import demo_recognisers, servant
 
 
 @pytest.fixture(scope="module")
 def recognisers():
-    return train_demo_recognisers(seed=0)
+    return demo_recognisers(paper=True)
 
 
 def test_same_seed_same_scene_and_another_seed_another():
@@ -208,7 +208,7 @@ def test_the_demos_start_up_reports_its_progress():
 def test_answers_at_once_are_the_answers_one_by_one():
     """What the engine asks of each window and picture (`answers`: one trip into the
     recogniser's space) is what `open_predict`, `confidence` and `open_probabilities` say."""
-    acoustic, visual = train_demo_recognisers(seed=0, paper=False)
+    acoustic, visual = demo_recognisers(paper=False)
     windows, _, pictures, _ = training_set(seed=7, windows_per_scene=2, pictures_per_scene=2)
     silence_and_noise = np.stack(
         [np.zeros_like(windows[0]), np.random.default_rng(3).standard_normal(len(windows[0]))]

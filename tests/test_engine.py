@@ -17,7 +17,7 @@ from servant_core.capture.source import ManualClock
 from servant_core.cli import build_parser
 from servant_core.cli.live import live_settings
 from servant_core.demo.audio_synth import DEMO_RATE
-from servant_core.demo.scenes import SCENES, synth_picture, synth_window, train_demo_recognisers
+from servant_core.demo.scenes import SCENES, synth_picture, synth_window
 from servant_core.engine import FRESH_METHODS, Engine, build_demo_engine, spectrum_db
 from servant_core.errors import ServantError
 from servant_core.events import (
@@ -41,12 +41,12 @@ from servant_core.servo.link import ManualClock as LinkClock
 from servant_core.servo.link import ServoLink
 from servant_core.settings import default_joints
 from servant_core.storage import default_model_file
-from tests.conftest import link_library, tone
+from tests.conftest import demo_recognisers, link_library, tone
 
 
 @pytest.fixture(scope="module")
 def recognisers():
-    return train_demo_recognisers(seed=0)
+    return demo_recognisers(paper=True)
 
 
 @pytest.fixture(scope="module")
@@ -575,7 +575,7 @@ def cafe_sound(windows: int) -> np.ndarray:
 def heard_at_the_cafe(clips: list[Clip], clock: ManualClock, **options: Any) -> Engine:
     """The engine on the demo's recognisers (Servant's own, in %) hearing `clips` at the demo's
     rate on `clock`, with the coffee shop's pictures all along, by the parallel policy."""
-    acoustic, visual = train_demo_recognisers(seed=0, paper=False)
+    acoustic, visual = demo_recognisers(paper=False)
     shots = iter(range(10**6))
     return Engine(
         audio=PacedAudio(clips, DEMO_RATE, realtime=False, clock=clock),

@@ -9,16 +9,17 @@ import numpy as np
 from servant_core.capture.replay import Clip, PacedAudio
 from servant_core.capture.source import ManualClock
 from servant_core.demo.audio_synth import DEMO_RATE
-from servant_core.demo.scenes import synth_window, train_demo_recognisers
+from servant_core.demo.scenes import synth_window
 from servant_core.engine import Engine, steady
 from servant_core.events import AcousticPrediction
+from tests.conftest import demo_recognisers
 
 # a café with one window of street noise in it (a door opened), then a real walk outside
 HEARD = ["coffee"] * 4 + ["street"] + ["coffee"] * 3 + ["street"] * 4
 
 
 def heard(smoother) -> list[str | None]:
-    acoustic, _ = train_demo_recognisers(seed=0, paper=False)
+    acoustic, _ = demo_recognisers(paper=False)
     clock = ManualClock()
     clips = [Clip(s, synth_window(s, np.random.default_rng([42, k]))) for k, s in enumerate(HEARD)]
     engine = Engine(
