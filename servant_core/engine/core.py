@@ -86,50 +86,26 @@ class Engine(ArmCommands):
     def __init__(
         self,
         *,
-        # an `AudioSource` / `FrameSource` (`servant_core.capture.source`), or None for a sense
-        # that is absent
         audio: AudioSource | None = None,
         camera: FrameSource | None = None,
-        # fitted recognisers (`servant_core.recognisers.base`), or None
         acoustic: Recogniser | None = None,
         visual: Recogniser | None = None,
-        # a `FusionPolicy` (default: the paper's `SequentialFusion`)
         fusion: FusionPolicy | None = None,
-        # the engine's time in seconds (default: monotonic seconds since construction)
         clock: Callable[[], float] | None = None,
-        # the window the acoustic recogniser judges (default: its own, else 5 s)
         window_seconds: float | None = None,
         spectrum_fps: float = SPECTRUM_FPS,
         spectrum_size: int = SPECTRUM_SIZE,
         reopen_seconds: float = 2.0,
-        # where `label_unknown` writes (default `data_dir()/"library"`)
         library_root: str | Path | None = None,
-        # the model file the recognisers came from: after a retrain or a fold-in the updated
-        # recognisers are saved back to it (atomically), so what the user taught survives a
-        # restart; None (the demo, or no model) keeps updates in memory only
         model_path: str | Path | None = None,
-        # {sense: method} a retrain fits for a sense that has no recogniser yet (a first start,
-        # before anything was taught); default `FRESH_METHODS`
         fresh_methods: Mapping[str, str] | None = None,
-        # percent; the arm does not act on a decision less sure than this that the wearer is in
-        # its scene and not somewhere else (`fusion.elsewhere`; with no sense that knows
-        # elsewhere, the less sure sense's share) (None: no threshold of the engine's own)
         confidence_threshold: float | None = None,
-        # filters consecutive windows' probabilities, so that one odd window does not flip the
-        # scene (recognisers in percent that know no elsewhere; None: each window alone); it
-        # starts afresh whenever the acoustic recogniser changes. A sound recogniser that knows
-        # elsewhere is held steady by `steady_open` instead (two windows in a row name a place;
-        # a place named stays while two windows give it half on average)
         smoother: SceneSmoother | None = None,
-        # {sense: `SampleSource`} for the sample senses (`servant_core.senses`: motion, ambient),
-        # and {sense: fitted recogniser} to judge their windows
         samples: Mapping[str, SampleSource] | None = None,
         sample_recognisers: Mapping[str, Recogniser] | None = None,
-        # "What is this place?" (`UnknownScene` for the sound) once the sound has named no taught
-        # place for this long; its label is for all those windows (one recording of them in the
-        # library, each window learned)
         ask_after_s: float = ASK_AFTER_S,
     ) -> None:
+        """Each argument and its default: docs/engine.md, "The engine's arguments"."""
         self.audio = audio
         self.camera = camera
         self.samples = dict(samples or {})
