@@ -51,14 +51,11 @@ class News:
 class LogNews:
     """Call it with each event, in order, from one thread at a time: the `News` of the event.
 
-    - a `Decision` is said when its place differs from the last one said (a first decision,
-      `No scene detected` too, is said);
-    - an `ArmState` when the arm has moved to a place's pose, or is connected, lost, armed or
-      disarmed since the last one said; not when it holds;
-    - an `AcousticPrediction` of no place right after one of a place, while a place is decided,
-      also says that place `left`; that counts as the decision none (a policy's own
-      `No scene detected` after it is not said again);
-    - every other event is said."""
+    Every event is said but a `Decision` of the place last said (a first one, even `No scene
+    detected`, is said) and an `ArmState` that holds: not moved to a place's pose, nor connected,
+    lost, armed or disarmed since the last one said. An `AcousticPrediction` of no place right after
+    one of a place, while a place is decided, also says that place `left`; that counts as the
+    decision none (a policy's own `No scene detected` after it is not said again)."""
 
     def __init__(self) -> None:
         self.silence = SilenceWatch()

@@ -2,10 +2,9 @@
 
 `servant` alone (or `servant run`) opens the TUI on the live devices; `servant demo` opens it on
 the demo scenes. With `--headless` (or `demo --fast`) they print lines instead, as servant_core's
-other subcommands do.
-
-Ctrl-C is quiet at any time, even in the first second, while the engine's libraries are still
-being imported: this module imports them only inside `main`, under the same guard.
+other subcommands do. Ctrl-C is quiet at any time, even in the first second, while the engine's
+libraries are still being imported: this module imports them only inside `main`, under the same
+guard.
 """
 
 from __future__ import annotations

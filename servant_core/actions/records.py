@@ -3,9 +3,8 @@
 They live in one JSON file (default `data_dir()/teach/records.json`), rewritten atomically on each
 new record. A file from an older version is read and migrated (its original is kept beside it as
 `.v<N>.bak` before the first rewrite); a broken or newer file is refused and never overwritten.
-
-Version 1 is the paper's shape: a scene label and one servo angle (`{"scene", "action", "t"}`).
-It becomes a pose for one joint (`legacy_joint`) and certain scores for its scene.
+Version 1 is the paper's shape: a scene label and one servo angle (`{"scene", "action", "t"}`);
+it becomes a pose for one joint (`legacy_joint`) and certain scores for its scene.
 """
 
 from __future__ import annotations

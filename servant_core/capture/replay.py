@@ -4,8 +4,7 @@
 arrive when a microphone would deliver them; as fast as possible it never sleeps and advances a
 `ManualClock` by each block's duration instead, so the engine's event times are stream times.
 `replay_recordings` feeds it from audio files (a corrupt one is reported and skipped), and
-`PictureReplay` shows pictures of whichever scene the audio is playing, so the whole engine can run
-over a scene library.
+`PictureReplay` shows pictures of whichever scene the audio is playing.
 """
 
 from __future__ import annotations

@@ -2,11 +2,9 @@
 
 All kinds are thin classes around a device or a file. They raise `ServantError` (one line: which
 device or file, what is wrong, what to do) when they fail; the engine reports it once and keeps
-running on the other senses, reopening the failed one from time to time.
-
-Clocks: the engine's time is any callable returning seconds. `ManualClock` is the clock of a run
-that goes as fast as possible: the replaying source advances it by each block's duration, so event
-times are stream times and a run is the same on every machine.
+running on the other senses, reopening the failed one from time to time. The engine's time is
+any callable returning seconds; `ManualClock` is the clock of a run as fast as possible: the
+replaying source advances it by each block's duration, so event times are stream times.
 """
 
 from __future__ import annotations

@@ -2,10 +2,9 @@
 
 They print the paper's terminal lines ("CoffeeScene detected") with their confidences, and what
 was heard and seen, as it happens; a decision, the arm and an unknown place are said when they
-change, not at every window they hold. `--json` prints one JSON object per event instead. They stop
-on Ctrl-C or after `--duration` seconds of engine time. Without `--headless` the `servant` console
-script opens the terminal application instead (servant_tui intercepts these commands); if it does
-not, they run headless.
+change, not at every window they hold. `--json` prints one JSON object per event instead. They
+stop on Ctrl-C or after `--duration` seconds of engine time. Without `--headless` the `servant`
+console script opens the terminal application instead; if it does not, they run headless.
 """
 
 from __future__ import annotations

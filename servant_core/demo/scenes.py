@@ -221,14 +221,9 @@ def demo_audio(seed: int = 0, *, realtime: bool = True, clock=None) -> PacedAudi
 class DemoCamera:
     """A frame source showing the walk's place, `CAMERA_LAG_S` behind its sound.
 
-    The walk begins when the camera is first opened, with the sound: the engine opens both when
-    it starts. Its clock (`clock()`, the engine's) began earlier, when the demo was built: the
-    training and a front end's start-up lie between, ~15 s at real speed, and a camera on the
-    clock's own time would run that far ahead of the sound. The sequential rule (hear, then look
-    for 30 s) then judged each place on pictures of the next, and lost whole places.
-
-    A picture depends only on the seed and the walk's time (to 0.1 s), so a run on a
-    `ManualClock` shows the same pictures every time.
+    The walk begins when the camera is first opened, with the sound (the engine opens both when it
+    starts), not when its clock (`clock()`, the engine's) began. A picture depends only on the seed
+    and the walk's time (to 0.1 s), so a run on a `ManualClock` shows the same pictures every time.
     """
 
     def __init__(

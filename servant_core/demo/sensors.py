@@ -2,10 +2,9 @@
 walks down the street (`demo.motion_synth`), with each place's light, warmth and pressure.
 
 At real speed they come from the sensor board's emulator on a pty, read through pyserial exactly
-as a real board would be (`demo.sensor_emulator`, `capture.sensors`); as fast as possible
-(a `ManualClock`), from the same synthesis window by window, following the sound's clock, so a
-fast run is the same on every machine. The motion follows where the wearer *is* — the scene
-heard — even while the camera still shows the café.
+as a real board would be (`demo.sensor_emulator`, `capture.sensors`); as fast as possible (a
+`ManualClock`), from the same synthesis window by window, following the sound's clock. The motion
+follows where the wearer *is* — the scene heard — even while the camera still shows the café.
 """
 
 from __future__ import annotations

@@ -4,9 +4,7 @@
 place?" and its label), `models` and `learning` (the recognisers; retrain, fold-in, saving),
 `arm` (the link and the poses; `arm_commands`, the engine's), `parts` (the parts made and wired
 together), `fusion_settings` (the user's fusion windows) and `factories` (the demo's and the
-live engine).
-
-Front ends import from here.
+live engine). Front ends import from here.
 """
 
 from servant_core.capture.source import ManualClock, MonotonicClock

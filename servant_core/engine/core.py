@@ -360,15 +360,13 @@ class Engine(ArmCommands):
         return self._models.retrain(library, on_progress)
 
     def label_unknown(self, window_id: str, scene: str) -> Path:
-        """Give the scene the user named to an unknown window, picture or sample sense's window
-        (from `UnknownScene`).
+        """Give an unknown window or picture (`UnknownScene`) the user's scene; return the file.
 
-        The name must pass `place_names.place_name` (one naming a known place in another case
-        is that place). It is written into the library (`library_root/<scene>/`, atomically),
-        then folded into a copy of the recogniser that replaces it, if it has `fold_in(X,
-        scenes)`; otherwise `retrain_needed` becomes True. With a `model_path`, the updated model
-        is saved there. Returns the file written. A refused name or a failed write is one
-        ServantError, and the window can still be labelled.
+        The name must pass `place_names.place_name` (a known place named in another case is that
+        place). The window is written atomically into the library (`library_root/<scene>/`), then
+        folded into a copy of the recogniser that replaces it if it has `fold_in(X, scenes)`, else
+        `retrain_needed` becomes True; with a `model_path`, the updated model is saved there. A
+        refused name or a failed write is one ServantError; the window can still be labelled.
         """
         root = self.library_root or data_dir() / "library"
         known = self._models.known_scenes()

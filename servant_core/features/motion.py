@@ -1,11 +1,9 @@
 """Motion features: what a window of accelerometer and gyroscope readings says about activity.
 
 The acceleration's magnitude is used, not its three axes: it does not depend on how the sensor
-is worn (the axes turn with the body; the magnitude is gravity plus the body's own motion).
-From it, its spread and its energy in frequency bands: walking puts its energy in the 1–3 Hz
-cadence band, a vehicle in the 8–20 Hz vibration band, sitting still has almost none. The
-gyroscope's magnitude adds how much the body turns. Energies are on a log scale: from still to
-running they span five orders of magnitude.
+is worn. From it, its spread and its energy in frequency bands (the 1–3 Hz cadence band, the
+8–20 Hz vibration band). The gyroscope's magnitude adds how much the body turns. Energies are on
+a log scale.
 """
 
 from __future__ import annotations

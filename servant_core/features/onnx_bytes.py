@@ -1,11 +1,9 @@
 """A minimal ONNX writer: a graph of nodes and float32 weights as the bytes of an ONNX model.
 
-ONNX models are Protocol Buffers messages. OpenCV's `dnn` module (already a dependency) runs
-them from bytes; writing the few messages a feed-forward graph needs (the model, its graph,
-nodes with integer attributes, float tensors, typed inputs and outputs) takes a page, where the
-`onnx` package would be one more dependency for the same bytes. Field numbers are those of
-onnx/onnx.proto (IR version 7, opset 13). Repeated numbers are written unpacked, one field each,
-which every protobuf reader accepts.
+It writes the few Protocol Buffers messages a feed-forward graph needs (the model, its graph,
+nodes with integer attributes, float tensors, typed inputs and outputs); OpenCV's `dnn` module
+runs them from bytes. Field numbers are those of onnx/onnx.proto (IR version 7, opset 13).
+Repeated numbers are written unpacked, one field each.
 """
 
 from __future__ import annotations

@@ -1,11 +1,10 @@
 """Fusion policies: when do a sound and a picture make a scene decision.
 
 A policy is fed predictions with their times and returns the events it produces (`Decision`,
-`FusionState`); time is always passed in, so tests run in no wall time. The learned policy also
-takes any sense's opinion with its scores (`LearnedFusion.on_sense`), and `scores=` on
-`on_acoustic`/`on_visual`; built from the registry with a config alone it has no net and
-decides as the parallel policy. Who feeds a policy is `fusion.pipeline.DecisionPipeline`, for
-the live engine and the command line alike.
+`FusionState`); time is always passed in. The learned policy also takes any sense's opinion with
+its scores (`LearnedFusion.on_sense`), and `scores=` on `on_acoustic`/`on_visual`; built from the
+registry with a config alone it has no net and decides as the parallel policy. Who feeds a policy
+is `fusion.pipeline.DecisionPipeline`, for the live engine and the command line alike.
 """
 
 from __future__ import annotations

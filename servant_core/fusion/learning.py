@@ -1,12 +1,10 @@
 """What the learned fusion learns from: each sense's opinions of items its recogniser never saw.
 
-A recogniser's opinions of its own training items are over-confident; a net trained on them
-would trust every sense too much. So the training items of each sense are cut into `k` folds,
-a fresh copy of its recogniser (same parameters) is fitted on all folds but one and gives its
-opinions on that one, in turn (cross-validated predictions). The folds follow how the items are
-tested: a recording's windows in contiguous blocks of time (neighbouring windows sound alike, so
-they are never split between fitting and judging when it can be helped), pictures in blocks of
-file order within each scene. The net then reuses the same folds to choose its threshold.
+The training items of each sense are cut into `k` folds; a fresh copy of its recogniser (same
+parameters) is fitted on all folds but one and gives its opinions on that one, in turn
+(cross-validated predictions). The folds are a recording's windows in contiguous blocks of time
+(never split between fitting and judging when it can be helped), pictures in blocks of file
+order within each scene. The net then reuses the same folds to choose its threshold.
 """
 
 from __future__ import annotations

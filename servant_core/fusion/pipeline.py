@@ -32,13 +32,10 @@ ARRIVE_SURE = 0.9
 class DecisionPipeline:
     """From opinions to decision events, in four steps a caller drives in this order:
 
-    - `hear`: a sound window's opinion held steady (`steady_open` for a sound that knows
-      somewhere else, else the `smoother`'s forward filter over its shares);
+    - `hear`: a sound window's opinion held steady (`steady_open` or the `smoother`);
     - `note`: a sense's latest scores, and whether they leave room for somewhere else;
     - `tell`: the opinion to the fusion policy, which may return a `Decision`;
-    - `settle`: a policy's decision as the wearer and the arm take it (`open_decision`):
-      once a sense that knows somewhere else has spoken, its figure is the probability of this
-      place and not somewhere else, from every sense; likelier somewhere else, no place.
+    - `settle`: a policy's decision as the wearer and the arm take it (`open_decision`).
 
     `tick`, `wants_picture` and `state` pass the clock to the policy."""
 

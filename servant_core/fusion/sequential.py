@@ -1,12 +1,10 @@
-"""The paper's sequential fusion: hear first, then look.
+"""The paper's sequential fusion: hear first, then look, ignoring acoustic predictions meanwhile.
 
-An acoustic prediction opens a window of `acoustic_window_s` (30 s). Pictures are taken every
-`picture_interval_s` while it is open; the scene is detected when `pictures_needed` visual
-predictions agreeing with the acoustic one fall within `confirm_window_s` (20 s) of each other,
-before the window closes. Then it says `<Scene>Scene detected` with the average of the acoustic
-confidence and the mean confidence of the confirming pictures. If the window closes first it says
-`No scene detected` (confidence 0.000) and starts listening again. While a window is open, further
-acoustic predictions are ignored, as in the paper, which does not listen while it looks.
+An acoustic prediction opens a window of `acoustic_window_s` (30 s), with a picture every
+`picture_interval_s`. When `pictures_needed` visual predictions agreeing with it fall within
+`confirm_window_s` (20 s) of each other, it says `<Scene>Scene detected` with the average of the
+acoustic confidence and the mean confidence of the confirming pictures; if the window closes
+first, `No scene detected` (confidence 0.000), and it starts listening again.
 """
 
 from __future__ import annotations

@@ -1,12 +1,10 @@
 """Per-scene K-Means centroids over window or picture descriptors, with an open set.
 
-The head both K-Means-centred methods beyond the paper share (`codebook` for sound, `bovw` for
-pictures): each scene's training descriptors are clustered by K-Means into a few centroids, each
-with its own spread. A row's per-scene probabilities come from its distances to the centroids
-scaled by their spreads (`scene_probabilities`); a row farther than `reject_distance` spreads
-from every centroid is a place the model does not know (`UNKNOWN`), not a forced guess. A
-confirmed label folds in without refitting: the nearest centroid of that scene moves toward the
-row as a running mean, or a new scene gets its own centroid.
+Each scene's training descriptors are clustered by K-Means into a few centroids, each with its
+own spread. A row's per-scene probabilities come from its distances to the centroids scaled by
+their spreads (`scene_probabilities`); a row farther than `reject_distance` spreads from every
+centroid is `UNKNOWN`, not a forced guess. A confirmed label folds in without refitting: the
+nearest centroid of that scene moves toward the row as a running mean, or a new scene gets one.
 """
 
 from __future__ import annotations
@@ -64,13 +62,9 @@ class SceneCentroids:
         """Cluster each scene's rows; calibrate the rejection on the training rows themselves.
 
         `reject_distance` is the `reject_quantile` of the training rows' distances to their own
-        centroid, in units of that centroid's spread, times `reject_margin` (training rows sit
-        closer to centroids fitted on them than later windows of the same place will).
-
-        `spread_shrinkage` pulls each spread toward the median spread (geometrically; 0 keeps
-        each cluster's own, 1 makes them all equal). A window unlike any training window is far
-        from every centroid; with unshrunk spreads the broadest scene (the one recorded in the
-        most different places) would claim all such windows.
+        centroid, in units of that centroid's spread, times `reject_margin`. `spread_shrinkage`
+        pulls each spread toward the median spread (geometrically; 0 keeps each cluster's own, 1
+        makes them all equal).
         """
         scenes_arr = np.asarray(scenes)
         names = sorted(set(scenes_arr.tolist()))

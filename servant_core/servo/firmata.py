@@ -1,12 +1,10 @@
 """Firmata, for an Arduino running StandardFirmata (Firmata protocol 2.x).
 
 Servo pins are configured with `SERVO_CONFIG` (`F0 70 pin min max F7`), which also sets their
-mode and makes the Arduino's Servo library clamp every pulse to [min, max]: a second, hardware
-side limit. Positions are written as analog messages (`E0|pin`, pins 0-15) or extended analog
-(`F0 6F`, any pin). StandardFirmata reads a value of 544 or more as microseconds (less would be
-degrees), so pulses are always sent in microseconds and joints below 544 us are refused. Firmata
-has no speed limit: the link's rate limiting is the only one. Positions are read back with a pin
-state query, which answers the last value written.
+mode and makes the Arduino's Servo library clamp every pulse to [min, max]. Positions are written
+as analog messages (`E0|pin`, pins 0-15) or extended analog (`F0 6F`, any pin), always in
+microseconds: joints below 544 us are refused. Firmata has no speed limit: the link's rate
+limiting is the only one. A pin state query reads a position back: the last value written.
 """
 
 from __future__ import annotations

@@ -85,15 +85,11 @@ class SoundStep(TeachStep):
     @work(thread=True, exclusive=True, group="record", exit_on_error=False)
     def record(self, scene: str) -> None:
         """The next seconds of sound into `<scene>/teach-….wav`, and the same seconds of each
-        sample sense beside it (`….imu.csv`, `….ambient.csv`). The sample senses record in
-        parallel with the sound, each on a thread of its own, since each records the seconds
-        from when it is asked. A sensor that fails loses only its own log: the sound is kept,
-        and the failure is one line in the log and a notification.
-
-        Teach mode closing (Escape, or the app quitting) stops the recording at once: Textual
-        sets this worker's cancelled event as the screen goes, and the engine's recordings
-        watch it. Nothing of a stopped recording is written, and the screen, gone, is not
-        touched again: the app says so in the log."""
+        sample sense beside it (`….imu.csv`, `….ambient.csv`), each sense on a thread of its
+        own. A sensor that fails loses only its own log: the sound is kept, and the failure is
+        one line in the log and a notification. Teach mode closing (Escape, or the app quitting)
+        stops the recording at once: nothing of a stopped recording is written, and the screen,
+        gone, is not touched again: the app says so in the log."""
         stop = get_current_worker().cancelled_event
         app = self.app  # a screen that has gone no longer knows its app
         engine = app.engine
