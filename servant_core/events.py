@@ -39,6 +39,7 @@ class AcousticPrediction:
     scores: dict[str, float] = field(default_factory=dict)  # per scene, sums to 1 when calibrated
     # The recogniser's `confidence_unit`: "%", or "eq. 1" in paper mode; None: not said.
     confidence_unit: str | None = None
+    silent: bool = False  # the window was silence: no recogniser was asked about it
 
 
 @dataclass(frozen=True)

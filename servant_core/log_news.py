@@ -3,8 +3,8 @@ lines and the TUI's log both ask a `LogNews`, so that they cannot disagree.
 
 A state that holds is said when it begins, not at every window it holds. What the events leave
 unsaid is said too: leaving the place decided when the sound stops naming a place (`No scene
-detected`, once), and a silent window as silence, not an unknown place (`SilenceWatch`). Each
-front end words events its own way (`event_text` holds the shared words).
+detected`, once), and whether that was for silence. Each front end words events its own way
+(`event_text` holds the shared words).
 """
 
 from __future__ import annotations
@@ -12,31 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from servant_core.events import AcousticPrediction, ArmState, Decision, Notice
-
-SILENCE_NOTICE = "microphone: silence"
-"""How the engine's notice of silent windows begins (`engine.judging.Judge._on_silence`)."""
-
-
-class SilenceWatch:
-    """Whether the sound's latest window was silence (`silent`), from the events alone.
-
-    The engine says so once, at the first silent window of a run (a `Notice`), then gives each
-    silent window an `AcousticPrediction` of no place with no share for any (no recogniser is
-    asked about silence). A prediction naming a place or giving one a share ends the run. The
-    events carry no mark of silence, so the first window with sound after silence reads as
-    silence too when it is unsure of every place (its held shares are all zero then)."""
-
-    def __init__(self) -> None:
-        self.silent = False
-
-    def see(self, event: Any) -> None:
-        if isinstance(event, Notice) and event.message.startswith(SILENCE_NOTICE):
-            self.silent = True
-        elif isinstance(event, AcousticPrediction) and (
-            event.scene is not None or any(event.scores.values())
-        ):
-            self.silent = False
+from servant_core.events import AcousticPrediction, ArmState, Decision
 
 
 @dataclass(frozen=True)
@@ -58,13 +34,11 @@ class LogNews:
     decision none (a policy's own `No scene detected` after it is not said again)."""
 
     def __init__(self) -> None:
-        self.silence = SilenceWatch()
         self._decided: tuple[str | None, ...] = ()  # the last decision said: (scene,)
         self._heard: str | None = None  # the place the sound's last window named
         self._arm: tuple[bool, bool] | None = None  # (connected, armed) last said
 
     def __call__(self, event: Any) -> News:
-        self.silence.see(event)
         if isinstance(event, Decision):
             if self._decided == (event.scene,):
                 return News(False)
@@ -78,7 +52,7 @@ class LogNews:
             return News(True)
         if isinstance(event, AcousticPrediction):
             before, self._heard = self._heard, event.scene
-            silent = event.scene is None and self.silence.silent
+            silent = event.silent
             decided = self._decided[0] if self._decided else None
             if event.scene is None and before is not None and decided is not None:
                 self._decided = (None,)

@@ -234,7 +234,7 @@ class ServantApp(App[None]):
                 # the next unknown place met behind a screen is logged
                 self.question.deferred = False
         news = self.news(event)
-        line = self._log_text(event, news.silent) if news.said else None
+        line = self._log_text(event) if news.said else None
         if line:
             self.log_line(event.t, line)
         if news.left is not None:

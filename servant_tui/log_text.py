@@ -28,8 +28,8 @@ def log_confidence(event: Any) -> str:
     return confidence_text(event.confidence, event.confidence_unit).replace(" %", "%")
 
 
-def log_text(event: Any, silent: bool = False) -> str | None:
-    """The log's line for an event; `silent`: the event is the sound of a silent window."""
+def log_text(event: Any) -> str | None:
+    """The log's line for an event, or None for one the log does not show."""
     if isinstance(event, ArmState):
         if event.pose_of is not None:
             return escape(arm_text(event))
@@ -48,6 +48,7 @@ def log_text(event: Any, silent: bool = False) -> str | None:
     if isinstance(event, (AcousticPrediction, VisualPrediction)):
         verb = "hears" if isinstance(event, AcousticPrediction) else "sees"
         if event.scene is None:  # a confidence in no scene says nothing
+            silent = isinstance(event, AcousticPrediction) and event.silent
             return f"{verb} {SILENCE if silent else place(None)}"
         confidence = log_confidence(event)
         return f"{verb} {escape(place(event.scene))} ({confidence})"

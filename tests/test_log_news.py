@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from servant_core.events import AcousticPrediction, ArmState, Decision, Notice
-from servant_core.log_news import SILENCE_NOTICE, LogNews, News, SilenceWatch
+from servant_core.log_news import LogNews, News
 
 CAFE = {"cafe": 0.9, "street": 0.05}
 
@@ -65,19 +65,18 @@ def test_a_decision_made_while_the_sound_names_no_place_is_not_left_at_every_win
         assert not news(decided(t, "cafe")).said
 
 
-def test_silence_is_the_engines_notice_until_the_sound_names_or_weighs_a_place():
-    watch = SilenceWatch()
-    watch.see(heard(5.0, None, {"cafe": 0.0, "street": 0.0}))
-    assert not watch.silent, "an unsure first window has no shares either: not silence"
-    watch.see(Notice(10.0, f"{SILENCE_NOTICE} (below -90 dBFS) names no place until …"))
-    watch.see(heard(10.0, None, {"cafe": 0.0, "street": 0.0}))
-    assert watch.silent
-    watch.see(Notice(12.0, "arm stays put: cafe is only 40 % sure"))
-    assert watch.silent
-    watch.see(heard(15.0, None, {"cafe": 0.2, "street": 0.1}))
-    assert not watch.silent
+def test_silence_is_the_engines_own_mark_on_a_silent_windows_prediction():
+    """The engine marks the prediction of a silent window (it asks no recogniser about it): an
+    unsure window with no share for any place is not silence, nor is a notice the log sees."""
+    news = LogNews()
+    assert not news(heard(5.0, None, {"cafe": 0.0, "street": 0.0})).silent, "unsure, not silent"
+    silent = AcousticPrediction(10.0, None, 0.0, {"cafe": 0.0, "street": 0.0}, "%", silent=True)
+    assert news(silent).silent
+    news(Notice(12.0, "arm stays put: cafe is only 40 % sure"))
+    assert not news(heard(15.0, None, {"cafe": 0.2, "street": 0.1})).silent
     news = LogNews()
     news(heard(5.0, "cafe", CAFE))
     news(decided(5.0, "cafe"))
-    news(Notice(10.0, SILENCE_NOTICE))
-    assert news(heard(10.0, None, {"cafe": 0.0})) == News(True, silent=True, left="cafe")
+    assert news(AcousticPrediction(10.0, None, 0.0, {"cafe": 0.0}, "%", silent=True)) == News(
+        True, silent=True, left="cafe"
+    )

@@ -330,7 +330,7 @@ class _Lines:
 
         with self._lock:
             news = self.news(event)
-            line = _event_line(event, silent=news.silent)
+            line = _event_line(event)
             if line is None or not news.said or not self._new(event):
                 return None
             if isinstance(event, UnknownScene):
@@ -384,9 +384,8 @@ def _sense_of(prediction: Any) -> str:
     return "image" if isinstance(prediction, VisualPrediction) else str(prediction.sense)
 
 
-def _event_line(event: Event, silent: bool = False) -> str | None:
-    """The line a person reads for an event, or None for events too frequent to print; `silent`:
-    the event is the sound of a silent window (`log_news.SilenceWatch`)."""
+def _event_line(event: Event) -> str | None:
+    """The line a person reads for an event, or None for events too frequent to print."""
     from servant_core.event_text import SILENCE, arm_text, confidence_text, place
     from servant_core.events import (
         AcousticPrediction,
@@ -412,6 +411,7 @@ def _event_line(event: Event, silent: bool = False) -> str | None:
             ("heard", "acoustic") if isinstance(event, AcousticPrediction) else ("saw", "visual")
         )
         if event.scene is None:  # a confidence in no scene says nothing
+            silent = isinstance(event, AcousticPrediction) and event.silent
             return f"{at} {verb} {SILENCE if silent else place(None)}"
         return f"{at} {verb} {place(event.scene)}  {sense} confidence {confidence}"
     if isinstance(event, SensePrediction):

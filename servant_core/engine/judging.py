@@ -135,7 +135,9 @@ class Judge:
         with self._lock:
             self.forget()
             self._decisions.scores["acoustic"] = scores
-        self._bus.emit(AcousticPrediction(t, None, 0.0, scores, acoustic.confidence_unit))
+        self._bus.emit(
+            AcousticPrediction(t, None, 0.0, scores, acoustic.confidence_unit, silent=True)
+        )
         self._judged("audio", None, 0.0, t, scores)
 
     def on_samples(self, sense: str, window: np.ndarray, rate: int) -> None:

@@ -18,7 +18,6 @@ from servant_core.events import (
     UnknownScene,
     VisualPrediction,
 )
-from servant_core.log_news import SilenceWatch
 from servant_core.senses import SAMPLE_SENSES
 from servant_tui.widgets.text import bar, clock
 
@@ -78,8 +77,6 @@ class ScenePane(Static):
         super().__init__(id=id)
         self.confirm_window_s = confirm_window_s
         self.heard: AcousticPrediction | None = None
-        self.silence = SilenceWatch()
-        self.heard_silence = False  # `heard` is of a silent window
         self.seen: VisualPrediction | None = None
         # a row for each sample sense in use, or heard from
         self.felt: dict[str, SensePrediction | None] = {
@@ -103,13 +100,11 @@ class ScenePane(Static):
         self.update(self._render_state(), layout=False)
 
     def show_event(self, event: object) -> None:
-        self.silence.see(event)
         if self.asked is not None and answers_question(event, self.asked.sense):
             self.asked = None
             self.deciding = True
         if isinstance(event, AcousticPrediction):
             self.heard = event
-            self.heard_silence = self.silence.silent
         elif isinstance(event, VisualPrediction):
             self.seen = event
         elif isinstance(event, SensePrediction):
@@ -156,7 +151,7 @@ class ScenePane(Static):
         rows: list[tuple[str, Text | str, Text | str]] = []
         senses = (("hears", self.heard), ("sees", self.seen), *self.felt.items())
         for name, prediction in senses:
-            silent = name == "hears" and self.heard_silence
+            silent = isinstance(prediction, AcousticPrediction) and prediction.silent
             rows.append(("sense", name, self._prediction_text(prediction, silent)))
         rows.append(("fusion", "fusion", self._fusion_text()))
         rows.append(("window", "window", self._window_text()))
