@@ -30,7 +30,7 @@ from servant_core.recognisers.background import (
     load_background,
 )
 from servant_core.recognisers.base import PERCENT, check_training_scenes, init_params
-from servant_core.recognisers.centroids import SceneCentroids
+from servant_core.recognisers.centroids import SceneCentroids, unit_rows
 from servant_core.recognisers.encoder_features import (
     eq_curves,
     equalised,
@@ -39,12 +39,7 @@ from servant_core.recognisers.encoder_features import (
     window_crops,
 )
 from servant_core.recognisers.linear_head import LinearHeadAnswers
-from servant_core.recognisers.visit_head import (
-    fit_visit_head,
-    place_proba,
-    softmax_proba,
-    unit_rows,
-)
+from servant_core.recognisers.visit_head import fit_visit_head, place_proba, softmax_proba
 
 ENCODER_RATE = 22050
 SCALE_FLOOR = 0.1

@@ -77,8 +77,3 @@ def place_proba(
     """(n, places): each place's likeliest visit's probability, or all its visits' together."""
     pool = np.sum if together else np.max
     return np.stack([pool(mode_proba[:, mode_scenes == place], axis=1) for place in places], axis=1)
-
-
-def unit_rows(D: np.ndarray) -> np.ndarray:
-    """Each row scaled to length 1 (a zero row stays zero)."""
-    return D / (np.linalg.norm(D, axis=1, keepdims=True) + 1e-12)
