@@ -250,8 +250,9 @@ def check_replaceable(
 ) -> None:
     """Refuse to write `what` at `path` when that would destroy something else: a symbolic link
     (replacing it loses the link, following it writes where the user did not say), an
-    existing file that `is_kind` does not recognise as a `what` (a recording, a document), or
-    a name a scene library would read as a recording, picture or sensor log."""
+    existing file that `is_kind` does not recognise as a `what` (a recording, a document), a
+    name a scene library would read as a recording, picture or sensor log, or a folder that
+    cannot be written. Called before the work whose result is written, so nothing is lost."""
     from servant_core.senses import sense_of_file  # senses needs audio, which needs storage
 
     path = Path(path)
@@ -285,14 +286,13 @@ def check_replaceable(
             f"{path}: is read-only, so it is not overwritten; make it writable "
             "(chmod u+w) or choose another name"
         )
+    _check_folder_writable(path, what)
 
 
-def check_folder_writable(path: str | os.PathLike[str], what: str) -> None:
-    """Refuse, before any work, a `what` at `path` whose folder cannot be written: a file on the
-    way where a folder should be, or a folder this user may not write (or on a read-only file
-    system). Folders still missing are fine when the nearest one that exists can be written:
-    the write makes them. Nothing is written here."""
-    path = Path(path)
+def _check_folder_writable(path: Path, what: str) -> None:
+    """Refuse a `what` at `path` whose folder cannot be written: a file on the way where a folder
+    should be, or a folder this user may not write. Folders still missing are fine when the
+    nearest one that exists can be written: the write makes them."""
     folder = path.absolute().parent
     while not os.path.exists(folder) and folder != folder.parent:  # os.path: never raises
         folder = folder.parent

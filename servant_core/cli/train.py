@@ -22,7 +22,7 @@ from servant_core.recognisers import Recogniser, make_audio_recogniser, make_rec
 from servant_core.recognisers.background import kept_out
 from servant_core.recognisers.base import fit_visits
 from servant_core.senses import ROLE_SENSE, SAMPLE_SENSES
-from servant_core.storage import check_folder_writable, default_model_file, file_stamp
+from servant_core.storage import default_model_file, file_stamp
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -53,8 +53,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 def _train_output(args: argparse.Namespace) -> Path:
     """The file `train` writes, checked before any work: its folder can be written, and the model
     `servant` loads is replaced only with `--force`."""
-    output = check_model_output(args.output or default_model_file())
-    check_folder_writable(output, "model")
+    output = check_model_output(args.output or default_model_file())  # its folder too
     if args.output is None and output.exists() and not args.force:
         raise ServantError(
             f"{output}: holds the model `servant` loads (what teach mode and earlier trainings "
