@@ -8,6 +8,8 @@ directly; `servant_core.features` has better visual features for the methods bey
 
 from __future__ import annotations
 
+from typing import Any
+
 import cv2
 import numpy as np
 
@@ -47,10 +49,11 @@ def dominant_colours(
     else:
         cv2.setRNGSeed(seed)
         criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.5)
-        _, labels, centres = cv2.kmeans(  # type: ignore[call-overload]
+        # OpenCV's stubs type kmeans differently from one release to the next (5.0, 5.1)
+        found: Any = cv2.kmeans(  # type: ignore[call-overload,unused-ignore]
             pixels, k, None, criteria, 1, cv2.KMEANS_PP_CENTERS
         )
-        labels = labels.ravel()
+        labels, centres = np.asarray(found[1]).ravel(), np.asarray(found[2], dtype=np.float32)
     counts = np.bincount(labels, minlength=k).astype(float)
     order = np.argsort(-counts, kind="stable")
     colours = np.clip(np.rint(centres[order]), 0, 255).astype(np.uint8)
