@@ -49,3 +49,36 @@ def test_at_an_untaught_place_the_pane_says_so_and_the_last_decision_is_history(
     rows = [(key, str(text)) for key, _, text in pane._rows()]
     assert ("decided", "StreetScene detected") in rows
     assert [text[:6] for key, text in rows if key == "history"] == ["cafe  "]
+
+
+def test_when_the_sound_stops_naming_the_place_decided_the_pane_says_so_as_the_log_does() -> None:
+    """Left the café into silence: the log says `No scene detected (cafe no longer heard:
+    silence)` at once; the pane said `CafeScene detected` until the next decision. It now says
+    what the log says, the café goes to the history, and the next decision replaces it."""
+    pane = ScenePane()
+    pane.show_event(AcousticPrediction(0.0, "cafe", 95.0, confidence_unit="%"))
+    cafe = Decision(5.0, "cafe", 81.0, "CafeScene detected", 90.0, 50.0, "%", not_elsewhere=True)
+    pane.show_event(cafe)
+    pane.show_event(AcousticPrediction(10.0, None, 0.0, silent=True))
+    rows = [(key, str(text)) for key, _, text in pane._rows()]
+    assert ("decided", "No scene detected") in rows
+    assert ("average", "cafe no longer heard: silence") in rows
+    assert any(key == "history" and text.startswith("cafe") for key, text in rows)
+
+    # the policy's own "none" afterwards keeps the why; only a place decided again replaces it
+    pane.show_event(Decision(20.0, None, 0.0, "No scene detected"))
+    assert ("average", "cafe no longer heard: silence") in [(k, str(t)) for k, _, t in pane._rows()]
+    pane.show_event(AcousticPrediction(25.0, "cafe", 95.0, confidence_unit="%"))
+    pane.show_event(Decision(30.0, "cafe", 82.0, "CafeScene detected", 90.0, 50.0, "%"))
+    rows = [(key, str(text)) for key, _, text in pane._rows()]
+    assert ("decided", "CafeScene detected") in rows
+    assert not any("no longer heard" in text for _, text in rows)
+
+
+def test_leaving_for_an_unknown_place_says_so_without_a_question_yet() -> None:
+    pane = ScenePane()
+    pane.show_event(AcousticPrediction(0.0, "cafe", 95.0, confidence_unit="%"))
+    pane.show_event(Decision(5.0, "cafe", 81.0, "CafeScene detected", 90.0, 50.0, "%"))
+    pane.show_event(AcousticPrediction(10.0, None, 0.0, confidence_unit="%"))
+    rows = [(key, str(text)) for key, _, text in pane._rows()]
+    assert ("average", "cafe no longer heard: an unknown place") in rows

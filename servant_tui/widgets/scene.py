@@ -9,7 +9,7 @@ from rich.table import Table
 from rich.text import Text
 from textual.widgets import Static
 
-from servant_core.event_text import SILENCE, UNKNOWN_PLACE, confidence_text
+from servant_core.event_text import SILENCE, UNKNOWN_PLACE, confidence_text, left_text
 from servant_core.events import (
     AcousticPrediction,
     Decision,
@@ -18,6 +18,8 @@ from servant_core.events import (
     UnknownScene,
     VisualPrediction,
 )
+from servant_core.fusion.sequential import NO_SCENE
+from servant_core.log_news import LogNews
 from servant_core.senses import SAMPLE_SENSES
 from servant_tui.widgets.text import bar, clock
 
@@ -92,6 +94,10 @@ class ScenePane(Static):
         # the question was answered (the sense names a taught place again) and nothing has been
         # decided since: the last decision was made before the wearer left, so it stays history
         self.deciding = False
+        # the log's rule for leaving (`LogNews`): the sound stopped naming the place decided, so
+        # that decision is history until the next one; what the log said of it, for the pane
+        self.news = LogNews()
+        self.left: str | None = None
 
     def on_mount(self) -> None:
         self.update(self._render_state(), layout=False)
@@ -103,6 +109,10 @@ class ScenePane(Static):
         if self.asked is not None and answers_question(event, self.asked.sense):
             self.asked = None
             self.deciding = True
+            self.left = None
+        news = self.news(event)
+        if news.left is not None:
+            self.left = left_text(news.left, news.silent)
         if isinstance(event, AcousticPrediction):
             self.heard = event
         elif isinstance(event, VisualPrediction):
@@ -114,6 +124,8 @@ class ScenePane(Static):
         elif isinstance(event, Decision):
             self.decisions.appendleft(event)
             self.deciding = False
+            if event.scene:  # a place decided again; a policy's own "none" keeps why it left
+                self.left = None
         elif isinstance(event, UnknownScene):
             self.asked = event
         else:
@@ -164,6 +176,11 @@ class ScenePane(Static):
             rows.append(("decided", "decided", Text(UNKNOWN_PLACE, "magenta")))
             rows.append(("average", "", Text(self._question_text(), "magenta")))
             history = list(self.decisions)
+        elif self.left is not None:
+            # the sound no longer names the place decided: it goes to the history, as in the log
+            rows.append(("decided", "decided", Text(NO_SCENE, "yellow")))
+            rows.append(("average", "", Text(self.left, "yellow")))
+            history = [d for d in self.decisions if d.scene]
         elif last is None or self.deciding:
             rows.append(
                 ("decided", "decided", Text("deciding…" if last else "nothing yet", "grey50"))
