@@ -121,6 +121,7 @@ class RecordingLink:
 
     armed = True
     at_goal = False
+    port = None  # no serial port: the engine names it "link"
 
     def __init__(self, clock: ManualClock) -> None:
         self.clock = clock
