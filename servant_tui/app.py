@@ -40,7 +40,7 @@ from servant_tui.messages import (
 from servant_tui.place_question import PROMPT_EVERY_S as PROMPT_EVERY_S  # bench/wearer_day
 from servant_tui.place_question import PlaceQuestion
 from servant_tui.screens.dialogs import HelpScreen
-from servant_tui.screens.live import LiveScreen, device_message
+from servant_tui.screens.live import LiveScreen, ShowsEvents, device_message
 from servant_tui.widgets.text import clock, error_text
 
 if TYPE_CHECKING:
@@ -58,6 +58,8 @@ class EngineLike(Protocol):
     library_root: Path | None  # where teach mode and the Library screen keep the scenes
     model_path: Path | None  # where a retrain or a label saves the model (None: not saved)
     user_settings: Any  # the settings it runs on (`servant_core.settings.Settings`), or None
+    # its `retrain` takes `on_progress(done, total)` (else the app counts the files it walks)
+    retrain_reports_progress: bool
     # its sound and picture recognisers (their `scenes_` and `method`), None before one is fitted
     acoustic: Any
     visual: Any
@@ -163,7 +165,8 @@ class ServantApp(App[None]):
         """The scenes the engine's recognisers know, and any it was heard or seen to name."""
         known = set(self.seen_scenes)
         for recogniser in (self.engine.acoustic, self.engine.visual):
-            known.update(str(s) for s in getattr(recogniser, "scenes_", []))
+            if recogniser is not None:
+                known.update(str(s) for s in recogniser.scenes_)
         return known
 
     @on(TrainingDone)
@@ -253,8 +256,8 @@ class ServantApp(App[None]):
         for screen in self._event_screens():
             screen.show_event(event)
 
-    def _event_screens(self) -> Iterable[Any]:
-        return [s for s in self.screen_stack if hasattr(s, "show_event")]
+    def _event_screens(self) -> Iterable[ShowsEvents]:
+        return [s for s in self.screen_stack if isinstance(s, ShowsEvents)]
 
     _log_text = staticmethod(log_text)  # the log's line for an event
 

@@ -17,6 +17,7 @@ from servant_core.events import Decision
 from servant_core.fusion import POLICIES, FusionConfig, LearnedFusion
 from servant_core.fusion.pipeline import ARRIVE_SURE, DecisionPipeline
 from servant_core.recognisers import UNKNOWN
+from servant_core.recognisers.base import Capabilities
 
 RATE = 16000
 CAFE = {"cafe": 0.8, "street": 0.05}  # the sound's probabilities (open: 0.15 elsewhere)
@@ -27,8 +28,9 @@ PICTURES = [
 ]
 
 
-class Scripted:
-    """A recogniser whose k-th featurized item gives `said[k % len(said)]`."""
+class Scripted(Capabilities):
+    """A recogniser whose k-th featurized item gives `said[k % len(said)]`; it declares it can
+    do nothing beyond the protocol (`Capabilities`' defaults)."""
 
     confidence_unit = "%"
     window_seconds = 5.0

@@ -98,6 +98,8 @@ async def test_library_retrain_and_evaluate_show_progress(tmp_path):
 
 async def test_library_uses_an_engines_own_progress_when_it_has_one(tmp_path):
     class ReportingEngine(ReplayEngine):
+        retrain_reports_progress = True
+
         def retrain(self, library, on_progress=None) -> None:
             on_progress(3, 7)  # what the engine says, not a count of files
             super().retrain(library)

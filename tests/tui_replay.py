@@ -144,6 +144,8 @@ def sensing_script() -> list[Any]:
 class ReplayEngine:
     """Emits `script` on `start()`, in order, from the calling thread; records what it is asked."""
 
+    retrain_reports_progress = False  # its `retrain` takes the library alone
+
     def __init__(
         self,
         script: list[Any] | None = None,

@@ -52,6 +52,7 @@ class PacedAudio:
         self.name = name
         self.rate = rate
         self.live = False
+        self.rate_note: str | None = None  # a replay plays at the rate it is given
         self.realtime = realtime
         self.clock = clock
         self.block = max(1, int(round(rate * block_seconds)))

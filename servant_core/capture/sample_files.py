@@ -252,6 +252,7 @@ class PacedSamples(PacedAudio):
     ) -> None:
         super().__init__(clips, rate, **options)  # type: ignore[arg-type]
         self.channels = channels
+        self.bad_lines = 0  # rows come from files, not from a board's lines
         self.follow = follow
 
     def read(self, timeout: float) -> np.ndarray | None:

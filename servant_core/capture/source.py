@@ -23,13 +23,15 @@ class AudioSource(Protocol):
     `name` for messages; `rate` in samples a second (known after `open`); `open()` acquires the
     device or file; `read(timeout)` → the next 1-D float32 block, or None after `timeout` s;
     `exhausted` once a replay has nothing more; `live`: a device (a fault closes it, the engine
-    reopens it later), else a replay (a fault is one bad file, the next goes on); `close()` is safe
+    reopens it later), else a replay (a fault is one bad file, the next goes on); `rate_note`: what
+    the engine says on opening instead of "listening at <rate> Hz" (None: that); `close()` is safe
     twice. `open` and `read` raise ServantError on a fault (device gone, corrupt file).
     """
 
     name: str
     rate: int
     live: bool
+    rate_note: str | None
 
     def open(self) -> None: ...
     def read(self, timeout: float) -> np.ndarray | None: ...
@@ -43,14 +45,18 @@ class SampleSource(Protocol):
     """Multichannel float32 samples in consecutive blocks: a motion or an ambient sensor.
 
     The same contract as `AudioSource`, except that a block is a 2-D array (n, channels) whose
-    columns `channels` names (e.g. ("ax", "ay", "az", "gx", "gy", "gz")), and `rate` is rows
-    per second (a sensor's rate: tens of hertz for motion, one or two for ambient values).
+    columns `channels` names (e.g. ("ax", "ay", "az", "gx", "gy", "gz")), `rate` is rows
+    per second (a sensor's rate: tens of hertz for motion, one or two for ambient values), and
+    `bad_lines` counts the lines a board sent that were not readings (0 from a file).
     """
 
     name: str
     rate: int
     live: bool
     channels: tuple[str, ...]
+
+    @property
+    def bad_lines(self) -> int: ...
 
     def open(self) -> None: ...
     def read(self, timeout: float) -> np.ndarray | None: ...

@@ -72,20 +72,14 @@ def _train_recognisers(
     summary: dict[str, Any] = {"warnings": []}
     if len({r.scene for r in library.recordings}) >= 2:
         recognisers["acoustic"], summary["acoustic"] = _train_audio(args, library, on_error)
-        summary["warnings"] += _label_warnings(recognisers["acoustic"])
+        summary["warnings"] += recognisers["acoustic"].fit_warnings()
     if len({p.scene for p in library.pictures}) >= 2:
         recognisers["visual"], summary["visual"] = _train_visual(args, library, on_error)
-        summary["warnings"] += _label_warnings(recognisers["visual"])
+        summary["warnings"] += recognisers["visual"].fit_warnings()
     for sense, model in _train_samples(args, library, on_error).items():
         recognisers[sense] = model
         summary[sense] = {"method": model.method, "scenes": model.scenes_}
     return recognisers, summary
-
-
-def _label_warnings(model: Recogniser) -> list[str]:
-    """What a recogniser's labels warned of while it was fitted (none if it keeps no labels)."""
-    warnings: list[str] = getattr(getattr(model, "labels_", None), "warnings", list)()
-    return warnings
 
 
 def _train_audio(

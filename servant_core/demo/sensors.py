@@ -114,6 +114,7 @@ class DemoStream:
         self.rate = RATES[stream]
         self.channels = CHANNELS[stream]
         self.live = True
+        self.bad_lines = 0  # the emulator's lines are readings: none counted
         self._serial: SampleSource | None = None
 
     def open(self) -> None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Collection, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from servant_core.engine.bus import EventBus
 from servant_core.errors import ServantError
@@ -19,6 +19,9 @@ from servant_core.event_text import place
 from servant_core.events import ArmState, Notice
 from servant_core.fusion.elsewhere import place_probability
 from servant_core.servo.calibration import clamp_pose
+
+if TYPE_CHECKING:
+    from servant_core.servo.link import ServoLink
 
 Pose = Mapping[str, float]
 PoseFor = Callable[[str, dict[str, dict[str, float]], float], Pose | None]
@@ -76,14 +79,14 @@ class ArmControl:
 
     # --- attaching ----------------------------------------------------------------------------
 
-    def set_arm(self, link: Any, why_none: str = "servo: no arm attached") -> None:
+    def set_arm(self, link: ServoLink | None, why_none: str = "servo: no arm attached") -> None:
         """Attach a link, or None to detach it (`why_none` says why). Not closed by the engine."""
         self.link = link
         if link is None:
             self.why_none = why_none
             self.bus.report("servo", False, why_none)
         else:
-            name = getattr(link, "port", None) or "link"
+            name = link.port or "link"
             self.bus.report("servo", True, f"servo: {name} attached")
         self.emit_state()
 

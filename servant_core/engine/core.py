@@ -36,6 +36,7 @@ from servant_core.fusion import FusionPolicy
 from servant_core.fusion.smoothing import SceneSmoother
 from servant_core.library import SceneLibrary
 from servant_core.recognisers import Recogniser
+from servant_core.recognisers.base import windowed
 from servant_core.senses import SAMPLE_SENSES
 from servant_core.storage import data_dir
 
@@ -73,6 +74,7 @@ class Engine(ArmCommands):
     fusion = Delegated("decisions", "policy")  # the fusion policy the decision pipeline feeds
     smoother = Delegated("decisions")
 
+    retrain_reports_progress = True  # `retrain` takes `on_progress(done, total)`
     _thread: threading.Thread | None = None  # the sense thread, while started
     _opened = False  # the senses were opened (`start`, or a first `run_until`)
     sensor_port: str | None = None  # the settings' board the senses were opened on
@@ -114,7 +116,9 @@ class Engine(ArmCommands):
             raise ValueError(f"no sample sense named {', '.join(unknown)}")
         self.clock: Callable[[], float] = clock or MonotonicClock()
         self.window_seconds = float(
-            window_seconds or getattr(acoustic, "window_seconds", None) or DEFAULT_WINDOW_SECONDS
+            window_seconds
+            or (windowed(acoustic).window_seconds if acoustic is not None else None)
+            or DEFAULT_WINDOW_SECONDS
         )
         self.reopen_seconds = reopen_seconds
         self.library_root = Path(library_root) if library_root else None

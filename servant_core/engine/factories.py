@@ -11,7 +11,7 @@ import tempfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from servant_core.capture.source import ManualClock, MonotonicClock
 from servant_core.engine.arm import Pose, PoseFor
@@ -30,6 +30,9 @@ from servant_core.fusion import (
 )
 from servant_core.fusion.smoothing import STEADY_FLOOR, STEADY_STAY, SceneSmoother
 from servant_core.senses import SAMPLE_SENSES, SENSES
+
+if TYPE_CHECKING:
+    from servant_core.actions.learner import ActionLearner
 
 
 def walk_narrator(engine: Engine) -> Callable[[Any], None]:
@@ -196,7 +199,7 @@ def steady() -> SceneSmoother:
     return SceneSmoother(stay=STEADY_STAY, floor=STEADY_FLOOR)
 
 
-def pose_for_taught(learner: Any) -> PoseFor:
+def pose_for_taught(learner: ActionLearner) -> PoseFor:
     """The engine's action hook for an `ActionLearner`: the pose taught for the decided scene.
 
     The learner is asked for the decided scene as a certainty (one-hot scores), not a blend of the
@@ -205,7 +208,7 @@ def pose_for_taught(learner: Any) -> PoseFor:
     """
 
     def pose_for(scene: str, scores: dict[str, dict[str, float]], confidence: float) -> Pose | None:
-        if scene not in getattr(learner, "taught_scenes_", (scene,)):
+        if scene not in learner.taught_scenes_:
             return None
         return learner.pose_for(scene, None, 100.0)
 

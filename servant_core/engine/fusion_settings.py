@@ -21,7 +21,7 @@ def reconfigured(policy: FusionPolicy, config: FusionConfig) -> FusionPolicy:
     """`policy` on the windows `config` (a policy of `servant_core.fusion`): itself when they are
     unchanged, so the current window stays open; a fresh one of its kind otherwise, a learned
     policy keeping the net it learned."""
-    if getattr(policy, "config", config) == config:
+    if policy.config == config:
         return policy
     if isinstance(policy, LearnedFusion):
         return LearnedFusion(config, policy.net)

@@ -37,7 +37,7 @@ from servant_core.features.rows import UnusableWindow, checked_rows
 from servant_core.fusion.elsewhere import beside_open_sound, shown
 from servant_core.fusion.pipeline import DecisionPipeline
 from servant_core.recognisers import UNKNOWN, Recogniser
-from servant_core.recognisers.base import answers, knows_elsewhere
+from servant_core.recognisers.base import answers, knows_elsewhere, windowed
 from servant_core.senses import SENSES
 
 log = logging.getLogger(__name__)
@@ -104,8 +104,7 @@ class Judge:
             self._on_silence(acoustic, t)
             return
         self._silent = False
-        model_rate = getattr(acoustic, "rate", rate)
-        X = acoustic.featurize(resample(window, rate, model_rate)[None, :])
+        X = acoustic.featurize(resample(window, rate, windowed(acoustic).rate)[None, :])
         unit = acoustic.confidence_unit
         open_ = knows_elsewhere(acoustic)
         with self._lock:
@@ -146,7 +145,7 @@ class Judge:
         if recogniser is None:
             return
         t = self._clock()
-        rows = learning.resampled_rows(window, rate, int(getattr(recogniser, "rate", rate)))
+        rows = learning.resampled_rows(window, rate, int(windowed(recogniser).rate))
         scene, confidence, scores = _predict(recogniser, recogniser.featurize([rows]))
         known = scene != UNKNOWN
         with self._lock:
@@ -154,7 +153,7 @@ class Judge:
         figure, unit = self._shown(scene if known else None, confidence, scores, recogniser)
         self._bus.emit(SensePrediction(t, sense, scene if known else None, figure, scores, unit))
         if not known and not self._places.named_elsewhere(sense, t):
-            kept = Kept(sense, rows, int(getattr(recogniser, "rate", rate)))
+            kept = Kept(sense, rows, int(windowed(recogniser).rate))
             self._places.ask(kept, scores, t)
         self._judged(sense, scene if known else None, confidence, t, scores)
 
@@ -189,7 +188,8 @@ class Judge:
         self._bus.emit(VisualPrediction(t, scene if known else None, figure, scores, unit))
         # The decision (and the arm's move) first; the palette is only for show.
         self.handle(events)
-        matched = visual.matched_palette(X)[0] if hasattr(visual, "matched_palette") else None
+        palettes = visual.matched_palette(X)
+        matched = palettes[0] if palettes is not None else None
         self._bus.emit(Palette(t, *dominant_colours(frame), scene if known else None, matched))
         if not known:
             self._places.ask(Kept("image", frame), scores, t)
@@ -247,7 +247,7 @@ class Judge:
 def decision_unit(*recognisers: Recogniser | None) -> str | None:
     """The unit of an average of these recognisers' confidences (a decision's): theirs when they
     all share one, as percentages do; else None (the paper's eq. 1 and eq. 2 share none)."""
-    units = {getattr(r, "confidence_unit", None) for r in recognisers}
+    units = {r.confidence_unit if r is not None else None for r in recognisers}
     return units.pop() if len(units) == 1 else None
 
 

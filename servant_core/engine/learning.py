@@ -22,9 +22,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from servant_core.audio import DEFAULT_RATE, resample, write_wav
+from servant_core.audio import resample, write_wav
 from servant_core.capture.sample_files import cut_sample_windows, read_samples, write_sample_csv
-from servant_core.capture.sensors import RATES
 from servant_core.errors import ServantError
 from servant_core.features.rows import checked_rows, usable_rows
 from servant_core.fusion.learning import (
@@ -238,7 +237,7 @@ def refit_audio(
     windows = featurize_recordings(
         library.recordings,
         model.featurize,
-        rate=getattr(model, "rate", DEFAULT_RATE),
+        rate=model.rate,
         seconds=window_seconds,
         on_error=on_error,
         on_progress=on_progress,
@@ -291,12 +290,13 @@ def _write_kept(folder: Path, window_id: str, kept: Kept) -> Path:
 
 
 def folded_in(recogniser: Any, kept: Kept, scene: str) -> Any:
-    """A copy of `recogniser` (one with `fold_in`) that also knows `kept` as `scene`."""
+    """A copy of `recogniser` (one that `folds_in`) that also knows `kept` as `scene`."""
     if kept.sense == "audio":
-        rate = getattr(recogniser, "rate", kept.rate)
-        X = recogniser.featurize(np.stack([resample(w, kept.rate, rate) for w in kept.windows]))
+        X = recogniser.featurize(
+            np.stack([resample(w, kept.rate, recogniser.rate) for w in kept.windows])
+        )
     elif kept.sense in SAMPLE_SENSES:
-        rows = resampled_rows(kept.data, kept.rate, int(getattr(recogniser, "rate", kept.rate)))
+        rows = resampled_rows(kept.data, kept.rate, recogniser.rate)
         X = recogniser.featurize([rows])
     else:
         X = recogniser.featurize([kept.data])
@@ -373,7 +373,7 @@ def refit_samples(
     on_progress: OnProgress | None = None,
 ) -> Any:
     """`model` fitted on the windows of a sample sense's logs; None if none gives a window."""
-    rate = int(getattr(model, "rate", RATES[stream]))
+    rate = int(model.rate)
     windows, scenes = sample_windows(files, stream, rate, window_seconds, on_error, on_progress)
     if not windows:
         return None
@@ -403,7 +403,7 @@ def library_fusion_net(
     opinions: dict[str, SenseOpinions] = {}
     audio, image = recognisers.get("audio"), recognisers.get("image")
     if audio is not None and library.recordings:
-        rate = getattr(audio, "rate", DEFAULT_RATE)
+        rate = audio.rate
         windows = featurize_recordings(
             library.recordings, audio.featurize, rate, window_seconds, on_error
         )
@@ -416,7 +416,7 @@ def library_fusion_net(
         model, stream = recognisers.get(sense), SAMPLE_SENSES[sense].stream
         if model is None or stream is None:
             continue
-        rate = int(getattr(model, "rate", RATES[stream]))
+        rate = int(model.rate)
         cut, scenes = sample_windows(files, stream, rate, window_seconds, on_error)
         if cut:
             opinions[sense] = held_out_opinions(

@@ -108,8 +108,8 @@ class Hearing:
         self._next_window_end = self.ring.total + int(round(self.window_seconds * rate))
         self._next_spectrum_at = self.ring.total
         self.ok = True
-        note = getattr(self.source, "rate_note", None)
-        self.bus.report("microphone", True, note or f"{self.source.name}: listening at {rate} Hz")
+        note = self.source.rate_note or f"{self.source.name}: listening at {rate} Hz"
+        self.bus.report("microphone", True, note)
 
     def close(self) -> None:
         self.source.close()
@@ -142,7 +142,7 @@ class Hearing:
 
     def _fault(self, error: ServantError) -> None:
         """A live device that stopped is closed and reopened later; a replay skips the bad file."""
-        if not getattr(self.source, "live", False):
+        if not self.source.live:
             self.bus.error(str(error))
             return
         self.bus.report("microphone", False, str(error))
@@ -309,12 +309,12 @@ class Feeling:
         self._rows_have = 0
         self.ok = True
         self.bus.report(self.device, True, f"{self.source.name}: reading at {self.source.rate} Hz")
-        if getattr(self.source, "live", False):  # a board: watched for stalls and its rate
+        if self.source.live:  # a board: watched for stalls and its rate
             self._watch = StreamWatch(self.source.name, self.source.rate, self.bus.clock())
             self._junk_at_open = self._junk()
 
     def _junk(self) -> int:
-        return int(getattr(self.source, "bad_lines", 0))
+        return int(self.source.bad_lines)
 
     def _said(self, news: News | None) -> None:
         if news is not None:
@@ -342,7 +342,7 @@ class Feeling:
         try:
             block = self.source.read(timeout)
         except ServantError as error:
-            if not getattr(self.source, "live", False):
+            if not self.source.live:
                 self.bus.error(str(error))
                 return
             self.bus.report(self.device, False, str(error))
@@ -366,7 +366,7 @@ class Feeling:
         if t - self._frame_at >= 1.0 / self.FRAMES_PER_SECOND:
             self._frame_at = t
             recent = np.concatenate(self._kept)[-int(self.source.rate * 10) :]
-            channels = tuple(getattr(self.source, "channels", ()))
+            channels = tuple(self.source.channels)
             self.bus.emit(SensorFrame(t, self.sense.name, channels, recent, self.source.rate))
         self._rows.append(block)
         self._rows_have += len(block)

@@ -73,7 +73,7 @@ class Models:
         """The places the recognisers know, which a label may name in another case."""
         with self._lock:
             models = list(self.by_sense().values())
-        return sorted({str(s) for model in models for s in getattr(model, "scenes_", [])})
+        return sorted({str(s) for model in models for s in model.scenes_})
 
     def retrain(
         self, library: SceneLibrary, on_progress: Callable[[int, int], None] | None
@@ -106,11 +106,11 @@ class Models:
 
     def fold_in(self, kept: Kept, scene: str) -> None:
         """Fold the labelled `kept` into a copy of its sense's recogniser and swap it in, if
-        that recogniser has `fold_in`; otherwise `retrain_needed` becomes True."""
+        that recogniser `folds_in`; otherwise `retrain_needed` becomes True."""
         with self._update_lock:
             with self._lock:
                 recogniser = self.by_sense().get(kept.sense)
-                if recogniser is None or not hasattr(recogniser, "fold_in"):
+                if recogniser is None or not recogniser.folds_in:
                     self.retrain_needed = True
                     return
             model = learning.folded_in(recogniser, kept, scene)
@@ -154,7 +154,8 @@ class Models:
         with self._lock:
             models = {"acoustic": self.acoustic, "visual": self.visual}
             models.update({SENSES[s].role: m for s, m in self.samples.items()})
-            net = getattr(self._decisions.policy, "net", None)
+            policy = self._decisions.policy
+            net = policy.net if isinstance(policy, LearnedFusion) else None
         learning.save_models(self.path, models, self._report_error, net)
 
     def _report_error(self, error: ServantError) -> None:

@@ -22,6 +22,7 @@ from servant_core.fusion.sequential import FusionConfig, SequentialFusion, scene
 class FusionPolicy(Protocol):
     hears_every_sense: ClassVar[bool]  # takes `on_sense(sense, scene, confidence, t, scores)`
     weighs_scores: ClassVar[bool]  # takes `scores=` on `on_acoustic` and `on_visual`
+    config: FusionConfig  # its windows
 
     def on_acoustic(
         self, scene: str | None, confidence: float, t: float

@@ -84,8 +84,9 @@ def load_background(
 
 def kept_out(model: Any, recordings: Sequence[Any]) -> Any:
     """`model`, told to keep the windows of `recordings` (library `Recording`s or paths) out of
-    its background, where it has one: a recording taught, or tested on, is not somewhere else."""
-    if hasattr(model, "background_exclude"):
+    its background, where it declares one (`background_path`): a recording taught, or tested on,
+    is not somewhere else."""
+    if model.background_path is not None:
         names = {Path(getattr(r, "path", r)).name for r in recordings}
         model.background_exclude = tuple(sorted(names))
     return model

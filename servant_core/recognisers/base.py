@@ -5,7 +5,7 @@ A recogniser is a scikit-learn-style estimator for one sense: stateless `featuri
 `predict_proba`'s column order; `predict(X)` (`UNKNOWN` where none), `confidence(X)` in
 `confidence_unit`, `predict_proba(X)` (rows sum to one); `open_proba(X)` when it knows somewhere
 else (rows sum to at most one); `get_state()` / `from_state(header, arrays)`, saved without
-pickle (`servant_core.modelfile`)."""
+pickle (`servant_core.modelfile`). What one can do beyond that it declares (`Capabilities`)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,8 @@ import inspect
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Protocol, Self
+from pathlib import Path
+from typing import Any, ClassVar, Protocol, Self, cast
 
 import numpy as np
 
@@ -27,6 +28,9 @@ class Recogniser(Protocol):
     method: ClassVar[str]
     sense: ClassVar[str]
     confidence_unit: ClassVar[str]
+    # what it can do beyond the protocol, declared: `Capabilities`
+    folds_in: ClassVar[bool]
+    learns_visits: ClassVar[bool]
 
     @property
     def scenes_(self) -> list[str]:
@@ -57,9 +61,33 @@ class Recogniser(Protocol):
     def knows_elsewhere(self) -> bool: ...
     def open_proba(self, X: np.ndarray) -> np.ndarray: ...
     def answers(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+    def matched_palette(self, X: np.ndarray) -> np.ndarray | None: ...
+    def fit_warnings(self) -> list[str]: ...
 
 
-class TaughtPlacesOnly:
+class Capabilities:
+    """What a recogniser can do beyond the protocol, declared by its class as scikit-learn's
+    estimator tags are, so that the engine reads them and never probes; each default says it
+    cannot. `tests/test_capabilities.py` checks every registered recogniser's declarations."""
+
+    # `fold_in(X, scenes)` adds labelled rows without a refit (else a label waits for a retrain)
+    folds_in: ClassVar[bool] = False
+    # `fit(X, scenes, visits=)` learns a place's visits apart (`fit_visits`)
+    learns_visits: ClassVar[bool] = False
+    # the universal background it keeps its places against, which the recordings in its
+    # `background_exclude` parameter are kept out of (`background.kept_out`); None: none
+    background_path: ClassVar[Path | None] = None
+
+    def matched_palette(self, X: np.ndarray) -> np.ndarray | None:
+        """The training palette each row matched (k RGB colours a row); None: it keeps none."""
+        return None
+
+    def fit_warnings(self) -> list[str]:
+        """What the fit found wrong with what it was taught (none by default)."""
+        return []
+
+
+class TaughtPlacesOnly(Capabilities):
     """The answers of a recogniser that knows only the places it was taught (a mixin for the
     paper's recognisers, the centroids' and the benches' peers): no room for somewhere else,
     its open probabilities its shares, its names `predict`'s."""
@@ -81,10 +109,17 @@ class TaughtPlacesOnly:
 
 
 class AcousticRecogniser(Recogniser, Protocol):
-    """An audio recogniser also says at what rate and window length it featurizes windows."""
+    """A recogniser of windows (the sound's, a sample sense's) also says at what rate and window
+    length it featurizes them."""
 
     rate: int
     window_seconds: float
+
+
+def windowed(recogniser: Recogniser) -> AcousticRecogniser:
+    """`recogniser`, one of windows of samples (the sound's, a sample sense's), as the type that
+    declares their `rate` and `window_seconds`."""
+    return cast(AcousticRecogniser, recogniser)
 
 
 @dataclass
@@ -146,9 +181,9 @@ def check_training_scenes(scenes: Sequence[str] | np.ndarray, n_rows: int) -> li
 
 
 def fit_visits(model: Any, X: np.ndarray, scenes: Any, visits: np.ndarray | None) -> Any:
-    """`model.fit(X, scenes)`, telling a method that learns a place's visits apart (one whose
-    `fit` takes `visits`) which visit each row comes from (`library.visits_of`)."""
-    if visits is not None and "visits" in inspect.signature(model.fit).parameters:
+    """`model.fit(X, scenes)`, telling a method that learns a place's visits apart (one that
+    declares `learns_visits`) which visit each row comes from (`library.visits_of`)."""
+    if visits is not None and model.learns_visits:
         return model.fit(X, scenes, visits=visits)
     return model.fit(X, scenes)
 

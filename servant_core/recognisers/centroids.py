@@ -166,6 +166,7 @@ class CentroidRecogniser(TaughtPlacesOnly):
     method: ClassVar[str]
     sense: ClassVar[str]
     confidence_unit: ClassVar[str] = PERCENT
+    folds_in: ClassVar[bool] = True
 
     clusters_per_scene: int
     spread_shrinkage: float

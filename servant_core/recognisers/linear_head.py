@@ -9,20 +9,28 @@ tempered softmax).
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Sequence
+from typing import Any, ClassVar, Self
 
 import numpy as np
 from sklearn.exceptions import NotFittedError
 
-from servant_core.recognisers.base import UNKNOWN, elsewhere_unnamed
+from servant_core.recognisers.base import UNKNOWN, Capabilities, elsewhere_unnamed
 from servant_core.recognisers.centroids import SceneCentroids
 
 
-class LinearHeadAnswers:
+class LinearHeadAnswers(Capabilities):
     head_: Any
     novelty_head_: SceneCentroids
+    # each folds a label into both heads; kmeans-encoder's visit head (birdnet's and effnet's
+    # through it) learns a place's visits apart, softbovw and fisher-bovw say they do not
+    folds_in: ClassVar[bool] = True
+    learns_visits: ClassVar[bool] = True
 
     def _space(self, X: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def fold_in(self, X: np.ndarray, scenes: Sequence[str]) -> Self:
         raise NotImplementedError
 
     @property

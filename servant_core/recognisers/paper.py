@@ -97,6 +97,10 @@ class KMeansSceneRecogniser(TaughtPlacesOnly):
             self.distances(X), self.spreads_, self.labels_.cluster_scene, self.scenes_
         )
 
+    def fit_warnings(self) -> list[str]:
+        """Clusters without a majority scene, scenes that own no cluster (`ClusterLabels`)."""
+        return self.labels_.warnings()
+
     def params(self) -> dict[str, Any]:
         raise NotImplementedError
 

@@ -226,7 +226,10 @@ class LibraryScreen(ReportsWorkerErrors):
     @work(thread=True, exclusive=True, group="retrain", exit_on_error=False)
     def retrain(self, on_progress: OnProgress) -> None:
         library = SceneLibrary.scan(self.root)
-        senses = with_progress(self.app.engine.retrain, library, on_progress)
+        engine = self.app.engine
+        senses = with_progress(
+            engine.retrain, library, on_progress, reports=engine.retrain_reports_progress
+        )
         saved = self.app.engine.model_path
         self.post_message(
             RetrainDone(
@@ -249,11 +252,13 @@ class LibraryScreen(ReportsWorkerErrors):
     def evaluate(self, on_progress: OnProgress) -> None:
         library = SceneLibrary.scan(self.root)
         # the method the engine listens with (a first start: the one a retrain would fit)
-        method = getattr(self.app.engine.acoustic, "method", None)
+        acoustic = self.app.engine.acoustic
+        method = acoustic.method if acoustic is not None else None
         result = with_progress(
             evaluate_audio,
             library,
             on_progress,
+            reports=True,
             pictures=False,
             method=method or FRESH_METHODS["audio"],
             protocol=TAUGHT,

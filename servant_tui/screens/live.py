@@ -120,7 +120,14 @@ class EventLog(RichLog):
         self._line_cache = LRUCache(self.CACHED_LINES)
 
 
-class LiveScreen(Screen[None]):
+class ShowsEvents:
+    """A screen the app hands each engine event to while it is in the screen stack."""
+
+    def show_event(self, event: object) -> None:
+        raise NotImplementedError
+
+
+class LiveScreen(Screen[None], ShowsEvents):
     """What the wearer sees while Servant runs; the base of the screen stack."""
 
     def __init__(self, sample_senses: Sequence[str] = ()) -> None:

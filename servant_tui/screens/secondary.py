@@ -9,7 +9,6 @@ own workers).
 from __future__ import annotations
 
 import dataclasses
-import inspect
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Any
 
@@ -67,14 +66,6 @@ class ReportsWorkerErrors(ServantScreen):
         """Show the failure where the job's progress was shown (override per screen)."""
 
 
-def takes_progress(fn: Callable[..., Any]) -> bool:
-    """Whether `fn` accepts an `on_progress(done, total)` keyword."""
-    try:
-        return "on_progress" in inspect.signature(fn).parameters
-    except (TypeError, ValueError):
-        return False
-
-
 class _Walked(list[Any]):
     """A list that reports how far it has been walked: the featurize loops walk a library's
     recordings (and pictures) once, in order, each step the cost of one file. Walking it again
@@ -117,13 +108,14 @@ def with_progress(
     library: SceneLibrary,
     on_progress: OnProgress,
     *,
+    reports: bool,
     pictures: bool = True,
     **options: Any,
 ) -> Any:
     """`job(library, **options)` reporting its progress: through its own `on_progress` when it
-    takes one, else by counting the files it walks (`walked_library`)."""
+    `reports` (takes one), else by counting the files it walks (`walked_library`)."""
     try:
-        if takes_progress(job):
+        if reports:
             return job(library, on_progress=on_progress, **options)
         return job(walked_library(library, on_progress, pictures), **options)
     finally:

@@ -16,6 +16,7 @@ from textual.widgets import ContentSwitcher, Footer, Header, Input, OptionList
 from servant_core.errors import ServantError
 from servant_core.events import SpectrumFrame
 from servant_core.library import SceneLibrary
+from servant_tui.screens.live import ShowsEvents
 from servant_tui.screens.secondary import HELP_AND_QUIT, ServantScreen
 from servant_tui.screens.teach.pictures import PicturesStep
 from servant_tui.screens.teach.pose import PoseStep
@@ -36,7 +37,7 @@ STEPS = (
 )
 
 
-class TeachScreen(ServantScreen):
+class TeachScreen(ServantScreen, ShowsEvents):
     BINDINGS = [
         Binding("escape", "app.pop_screen", "Back"),
         # Priority: the app runs the step change before it forwards the next key of a burst.

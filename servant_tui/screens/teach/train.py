@@ -114,7 +114,10 @@ class TrainStep(TeachStep):
     @work(thread=True, exclusive=True, group="retrain", exit_on_error=False)
     def retrain(self, on_progress: OnProgress) -> None:
         library = SceneLibrary.scan(self.app.library_root)
-        senses = with_progress(self.app.engine.retrain, library, on_progress)
+        engine = self.app.engine
+        senses = with_progress(
+            engine.retrain, library, on_progress, reports=engine.retrain_reports_progress
+        )
         self.post_message(RetrainDone(retrained_text(senses, library)))
 
     @on(RetrainDone)
