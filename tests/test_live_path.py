@@ -457,9 +457,11 @@ def test_servant_run_headless_at_a_place_never_taught_keeps_the_arm_still(
     assert result.stdout.count("silence (below -90 dBFS) names no place") == 1, result.stdout
     heard = [line for line in result.stdout.splitlines() if " heard " in line]
     assert len(heard) >= 8, result.stdout
-    # the muted windows are silence, the building site's an unknown place
+    # the muted windows are silence, the building site's an unknown place; how many of the 15
+    # muted seconds the run hears depends on how long it takes to start (a loaded CI machine
+    # took 7 s and heard one silent window): at least one, never more than the 15 s hold
     silent = sum(line.endswith(" heard silence") for line in heard)
-    assert 2 <= silent <= 3, result.stdout
+    assert 1 <= silent <= 3, result.stdout
     assert all(line.endswith(" heard silence") for line in heard[:silent]), result.stdout
     unknown = sum(line.endswith(" heard an unknown place") for line in heard[silent:])
     assert unknown >= len(heard) - silent - 1, result.stdout
