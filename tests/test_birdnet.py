@@ -247,3 +247,72 @@ def test_the_acceptance_follows_a_fold_in_and_old_models_keep_the_fixed_cosine(
     del header["params"]["calibrated_accept"]  # a model file saved before the calibration
     old = BirdnetAcousticRecogniser.from_state(header, arrays)
     assert not old.calibrated_accept and old._acceptance("street") == old.accept_cosine == 0.5
+
+
+# -- a place of several visits is also its kind (issue 37) ------------------------------------
+
+
+def visits_of_two_kinds(seed: int = 0):
+    """Embeddings of two kinds of place, each heard on three visits (a kind's direction plus a
+    visit's own, four windows each), and a fourth visit of each never taught."""
+    rng = np.random.default_rng(seed)
+    kinds = rng.normal(size=(2, 1024))
+    rows, scenes, visits, later = [], [], [], []
+    for k, scene in enumerate(("cafe", "street")):
+        for v in range(4):
+            visit = kinds[k] + 1.5 * rng.normal(size=1024)
+            heard = visit + 0.5 * rng.normal(size=(4, 1024))
+            if v == 3:
+                later.append(heard)
+                continue
+            rows.append(heard)
+            scenes += [scene] * 4
+            visits += [f"{scene} {v}"] * 4
+    return np.vstack(rows), np.array(scenes), np.array(visits), np.vstack(later)
+
+
+def test_a_place_is_the_mean_of_its_likeliest_visit_and_its_kind() -> None:
+    """`predict_proba`: the plain mean of the visit head's shares and a head of one class a
+    place; `open_proba` (what the arm reads) is the visit head's alone."""
+    X, scenes, visits, later = visits_of_two_kinds()
+    model = BirdnetAcousticRecogniser(background=False).fit(X, scenes, visits)
+    visit_head = BirdnetAcousticRecogniser(background=False, place_share=0.0)
+    visit_head.fit(X, scenes, visits)
+    place_head = BirdnetAcousticRecogniser(background=False, place_share=0.0).fit(X, scenes)
+    assert model.place_share == 0.5 and len(model.coef_) == 6 and len(model.place_coef_) == 2
+    expected = 0.5 * visit_head.predict_proba(later) + 0.5 * place_head.predict_proba(later)
+    np.testing.assert_allclose(model.predict_proba(later), expected, atol=1e-9)
+    assert not np.allclose(model.predict_proba(later), visit_head.predict_proba(later))
+    np.testing.assert_allclose(model.open_proba(later), visit_head.open_proba(later))
+
+
+def test_with_one_visit_a_place_the_two_heads_are_one() -> None:
+    """Teach mode's places (one visit each): the mean changes nothing (the wearer's walk)."""
+    X, scenes, _, later = visits_of_two_kinds(1)
+    model = BirdnetAcousticRecogniser(background=False).fit(X, scenes)
+    alone = BirdnetAcousticRecogniser(background=False, place_share=0.0).fit(X, scenes)
+    np.testing.assert_allclose(model.predict_proba(later), alone.predict_proba(later))
+    with pytest.raises(ValueError, match="place_share"):
+        BirdnetAcousticRecogniser(place_share=1.5).fit(X, scenes)
+
+
+def test_the_model_file_keeps_the_place_head_and_one_from_before_has_none(tmp_path) -> None:
+    from tests.test_modelfile import refused_in_one_line, rewrite_arrays
+
+    X, scenes, visits, later = visits_of_two_kinds(2)
+    model = BirdnetAcousticRecogniser(background=False).fit(X, scenes, visits)
+    path = save_model(tmp_path / "m.npz", {"acoustic": model})
+    loaded = load_model(path)["acoustic"]
+    np.testing.assert_allclose(loaded.predict_proba(later), model.predict_proba(later))
+    # saved before the place head: no such arrays nor parameter, the visit head alone
+    header, arrays = model.get_state()
+    del header["params"]["place_share"]
+    old = BirdnetAcousticRecogniser.from_state(header, arrays)
+    assert old.place_share == 0.0
+    alone = copy.deepcopy(model)
+    alone.place_share = 0.0
+    np.testing.assert_allclose(old.predict_proba(later), alone.predict_proba(later))
+    rewrite_arrays(
+        path, lambda a: [a.pop(f"acoustic/{k}") for k in ("place_coef", "place_intercept")]
+    )
+    refused_in_one_line(path, "place head's rows do not match its places")

@@ -33,6 +33,10 @@ MISSING = (
 DEFAULT_C = 0.1
 # a window farther than this cosine from every taught window of a place is not that place
 ACCEPT_COSINE = 0.5
+# `predict_proba`: the plain mean of the visit head's shares and a head with one class a place,
+# which carries a kind to places never taught (docs/research.md, issue 37); where every place is
+# one visit the two are the same head
+PLACE_SHARE = 0.5
 
 
 def model_path() -> Path:
@@ -105,9 +109,13 @@ def crops_of(windows: np.ndarray) -> np.ndarray:
 
 class BirdnetAcousticRecogniser(KMeansEncoderAcousticRecogniser):
     method: ClassVar[str] = "birdnet"
-    # a model saved before the nearest-taught-window check had none, and one saved before it
-    # was calibrated had the fixed cosine
-    legacy_params: ClassVar[dict[str, Any]] = {"accept_cosine": None, "calibrated_accept": False}
+    # a model saved before the nearest-taught-window check had none, one saved before it was
+    # calibrated had the fixed cosine, and one saved before the place head mixed none in
+    legacy_params: ClassVar[dict[str, Any]] = {
+        "accept_cosine": None,
+        "calibrated_accept": False,
+        "place_share": 0.0,
+    }
     background_path: ClassVar[Path] = Path(__file__).with_name("background_birdnet.npz")
     # what a background file must share with the model to be used
     background_keys: ClassVar[tuple[str, ...]] = ("rate", "window_seconds", "method")
@@ -125,6 +133,7 @@ class BirdnetAcousticRecogniser(KMeansEncoderAcousticRecogniser):
         elsewhere_weight: float = 1.0,
         accept_cosine: float | None = ACCEPT_COSINE,
         calibrated_accept: bool = False,
+        place_share: float = PLACE_SHARE,
         background_exclude: Sequence[str] = (),
         random_state: int | None = 0,
     ) -> None:
@@ -138,6 +147,7 @@ class BirdnetAcousticRecogniser(KMeansEncoderAcousticRecogniser):
         self.elsewhere_weight = elsewhere_weight
         self.accept_cosine = accept_cosine
         self.calibrated_accept = calibrated_accept
+        self.place_share = place_share
         self.background_exclude = background_exclude
         self.random_state = random_state
 

@@ -7,8 +7,9 @@ A multinomial logistic head over the standardised statistics and encodings (the 
 by `encoding_weight`; training windows also seen through fixed equalisations) has one class per
 visit of a place plus `<elsewhere>`, learned from the universal background
 (`recognisers.background`). `predict_proba`: the share among taught places, a place scored by its
-likeliest visit; `open_proba`: the probability of a place and not somewhere else (its visits
-summed). Both are softmax(logits / `temperature`). A window farther than the rejection distance
+likeliest visit (mixed with a head of one class a place: `place_share`, `birdnet`'s);
+`open_proba`: the probability of a place and not somewhere else (its visits summed). Both are
+softmax(logits / `temperature`). A window farther than the rejection distance
 from every place's centroid (`SceneCentroids`) is `UNKNOWN`. `fit` takes each window's visit
 (`visits`; `library.visits_of`); without them a place is one visit."""
 
@@ -75,6 +76,8 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
     accept_cosine: float | None = None
     # each place's acceptance from the background instead (`_acceptance`; `birdnet` offers it)
     calibrated_accept: bool = False
+    # the share of a head with one class a place in `predict_proba` (`_proba`; `birdnet` has one)
+    place_share: float = 0.0
 
     def __init__(
         self,
@@ -197,6 +200,8 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
             raise ValueError(f"{len(X)} feature rows but {len(visits)} visit labels")
         if not self.temperature > 0:
             raise ValueError(f"temperature must be above 0, not {self.temperature!r}")
+        if not 0 <= self.place_share <= 1:
+            raise ValueError(f"place_share must be from 0 to 1, not {self.place_share!r}")
 
     def _fit_scale(self, D: np.ndarray) -> None:
         """Each descriptor column's mean and spread over `D`, the spread floored."""
@@ -259,6 +264,18 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
             head.elsewhere_coef,
             head.elsewhere_intercept,
         )
+        self.place_coef_, self.place_intercept_ = self.coef_, self.intercept_
+        if self.place_share and len(self.mode_scenes_) > len(self.classes_):
+            places = fit_visit_head(
+                self.train_descriptors_,
+                self.train_scenes_,
+                self.train_scenes_,
+                self.background_descriptors_,
+                self._column_weights(),
+                C=self.C,
+                elsewhere_weight=self.elsewhere_weight,
+            )
+            self.place_coef_, self.place_intercept_ = places.coef, places.intercept
 
     def fold_in(self, X: np.ndarray, scenes: Sequence[str]) -> Self:
         """Add windows with confirmed labels: both heads are refitted on the stored training
@@ -305,9 +322,17 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
             raise NotFittedError(f"this {type(self).__name__} is not fitted yet; call fit first")
 
     def _proba(self, D: np.ndarray) -> np.ndarray:
+        """Each place's likeliest visit's share among the taught places; with a `place_share`,
+        mixed with that share of a head with one class a place (`place_coef_`: the same head
+        where every place is one visit)."""
         mode_proba = softmax_proba((D @ self.coef_.T + self.intercept_) / self.temperature)
         places = place_proba(mode_proba, self.mode_scenes_, self.classes_)
-        return places / places.sum(axis=1, keepdims=True)
+        places = places / places.sum(axis=1, keepdims=True)
+        if not self.place_share:
+            return places
+        logits = D @ self.place_coef_.T + self.place_intercept_
+        kinds = softmax_proba(logits / self.temperature)
+        return (1.0 - self.place_share) * places + self.place_share * kinds
 
     @property
     def knows_elsewhere(self) -> bool:
@@ -380,6 +405,8 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
             "background_descriptors": self.background_descriptors_.astype(np.float32),
             "elsewhere_coef": self.elsewhere_coef_,
             "elsewhere_intercept": self.elsewhere_intercept_,
+            "place_coef": self.place_coef_,
+            "place_intercept": self.place_intercept_,
             **{f"novelty_{k}": v for k, v in novelty_arrays.items()},
         }
         return header, arrays
@@ -431,6 +458,14 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         model.elsewhere_intercept_ = np.asarray(
             arrays.get("elsewhere_intercept", np.empty(0)), dtype=np.float64
         )
+        # a model file saved before the head with one class a place mixes none of it in
+        # (`legacy_params`): its rows are then never read
+        model.place_coef_ = np.asarray(arrays.get("place_coef", model.coef_), dtype=np.float64)
+        model.place_intercept_ = np.asarray(
+            arrays.get("place_intercept", model.intercept_), dtype=np.float64
+        )
+        if model.place_share and len(model.place_coef_) != len(model.classes_):
+            raise ValueError("its place head's rows do not match its places")
         prefixed = {k[len("novelty_") :]: v for k, v in arrays.items() if k.startswith("novelty_")}
         model.novelty_head_ = SceneCentroids.from_state(header["novelty"], prefixed)
         return model
