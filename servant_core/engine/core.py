@@ -53,6 +53,13 @@ NO_MODEL = (
 )
 
 
+def window_length(asked: float | None, acoustic: Recogniser | None) -> float:
+    """The sound window's length in seconds: as asked, else the sound recogniser's, else the
+    default."""
+    own = windowed(acoustic).window_seconds if acoustic is not None else None
+    return float(asked or own or DEFAULT_WINDOW_SECONDS)
+
+
 class Engine(ArmCommands):
     """Senses → recognisers → fusion → decisions (→ poses → arm), as events to subscribers.
 
@@ -115,11 +122,7 @@ class Engine(ArmCommands):
         if unknown:
             raise ValueError(f"no sample sense named {', '.join(unknown)}")
         self.clock: Callable[[], float] = clock or MonotonicClock()
-        self.window_seconds = float(
-            window_seconds
-            or (windowed(acoustic).window_seconds if acoustic is not None else None)
-            or DEFAULT_WINDOW_SECONDS
-        )
+        self.window_seconds = window_length(window_seconds, acoustic)
         self.reopen_seconds = reopen_seconds
         self.library_root = Path(library_root) if library_root else None
         self.ask_after_s = ask_after_s
