@@ -100,7 +100,6 @@ class FisherBovwVisualRecogniser(LinearHeadAnswers):
     method: ClassVar[str] = "fisher-bovw"
     sense: ClassVar[str] = "image"
     confidence_unit: ClassVar[str] = PERCENT
-    learns_visits: ClassVar[bool] = False  # a place is its pictures or windows, visits aside
 
     def __init__(
         self,

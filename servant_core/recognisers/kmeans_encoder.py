@@ -66,6 +66,8 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
     method: ClassVar[str] = "kmeans-encoder"
     sense: ClassVar[str] = "audio"
     confidence_unit: ClassVar[str] = PERCENT
+    # its head has a class a visit (birdnet's and effnet's through it): `fit` takes `visits`
+    learns_visits: ClassVar[bool] = True
     # the parameters an older model file lacks, at the values it was made with (LEGACY_PARAMS)
     legacy_params: ClassVar[dict[str, Any]] = LEGACY_PARAMS
     # the universal background this featurizer's windows are kept in (`recognisers.background`)

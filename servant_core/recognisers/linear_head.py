@@ -22,10 +22,8 @@ from servant_core.recognisers.centroids import SceneCentroids
 class LinearHeadAnswers(Capabilities):
     head_: Any
     novelty_head_: SceneCentroids
-    # each folds a label into both heads; kmeans-encoder's visit head (birdnet's and effnet's
-    # through it) learns a place's visits apart, softbovw and fisher-bovw say they do not
+    # each folds a label into both heads
     folds_in: ClassVar[bool] = True
-    learns_visits: ClassVar[bool] = True
 
     def _space(self, X: np.ndarray) -> np.ndarray:
         raise NotImplementedError

@@ -90,7 +90,6 @@ class SoftBovwVisualRecogniser(LinearHeadAnswers):
     method: ClassVar[str] = "softbovw"
     sense: ClassVar[str] = "image"
     confidence_unit: ClassVar[str] = PERCENT
-    learns_visits: ClassVar[bool] = False  # a place is its pictures or windows, visits aside
 
     def __init__(
         self,
