@@ -40,7 +40,12 @@ from servant_core.recognisers.encoder_features import (
     window_crops,
 )
 from servant_core.recognisers.linear_head import LinearHeadAnswers
-from servant_core.recognisers.visit_head import fit_visit_head, place_proba, softmax_proba
+from servant_core.recognisers.visit_head import (
+    VisitHead,
+    fit_visit_head,
+    place_proba,
+    softmax_proba,
+)
 
 ENCODER_RATE = 22050
 SCALE_FLOOR = 0.1
@@ -251,15 +256,7 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         return weights
 
     def _fit_head(self) -> None:
-        head = fit_visit_head(
-            self.train_descriptors_,
-            self.train_scenes_,
-            self.train_visits_,
-            self.background_descriptors_,
-            self._column_weights(),
-            C=self.C,
-            elsewhere_weight=self.elsewhere_weight,
-        )
+        head = self._head(self.train_visits_)
         self.mode_scenes_, self.classes_ = head.mode_scenes, head.classes
         self.coef_, self.intercept_ = head.coef, head.intercept
         self.elsewhere_coef_, self.elsewhere_intercept_ = (
@@ -268,16 +265,20 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         )
         self.place_coef_, self.place_intercept_ = self.coef_, self.intercept_
         if self.place_share and len(self.mode_scenes_) > len(self.classes_):
-            places = fit_visit_head(
-                self.train_descriptors_,
-                self.train_scenes_,
-                self.train_scenes_,
-                self.background_descriptors_,
-                self._column_weights(),
-                C=self.C,
-                elsewhere_weight=self.elsewhere_weight,
-            )
+            places = self._head(self.train_scenes_)  # one visit a place
             self.place_coef_, self.place_intercept_ = places.coef, places.intercept
+
+    def _head(self, visits: np.ndarray) -> VisitHead:
+        """The logistic head over every stored descriptor, a class each of `visits`."""
+        return fit_visit_head(
+            self.train_descriptors_,
+            self.train_scenes_,
+            visits,
+            self.background_descriptors_,
+            self._column_weights(),
+            C=self.C,
+            elsewhere_weight=self.elsewhere_weight,
+        )
 
     def fold_in(self, X: np.ndarray, scenes: Sequence[str]) -> Self:
         """Add windows with confirmed labels: both heads are refitted on the stored training
