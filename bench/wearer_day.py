@@ -4,8 +4,9 @@ For each library size (2, 3 and 5 places) and each draw, places are drawn among 
 have both recordings and pictures in `../shared/data`; each is taught as teach mode does: the
 first `--shots` windows (5 s each; teach mode asks for six, `TEACH_WINDOWS`) of one of its
 recordings and `--pictures` of its pictures.
-The recognisers are Servant's defaults (`birdnet`, `fisher-bovw`), fitted as a retrain
-fits them. Then the wearer walks through stays of `--stay` seconds, in a random order:
+The recognisers are Servant's defaults (`--audio-method`, `--image-method` to walk others),
+fitted as a retrain fits them. Then the wearer walks through stays of `--stay` seconds, in a
+random order:
 
 - taught, same microphone: later windows of the taught recordings, with other pictures of the
   place's kind (never the taught ones);
@@ -282,13 +283,15 @@ def walk(
     accept_cosine: float | None = None,
     calibrated: bool = False,
     arrive_sure: float | None = ARRIVE_SURE,
+    image_method: str = FRESH_METHODS["image"],
 ) -> dict[str, Any]:
     """Teach, then walk through the engine; what happened in each stay. `answering`: the wearer
     answers "What is this place?" (`--answers`); `threshold`: the arm's confidence threshold in
     percent (None: the user's default); `audio_method`: the sound's recogniser;
     `accept_cosine`: a fixed nearest-taught-window cosine (None: the method's own);
     `calibrated`: each place's acceptance calibrated by the background instead; `arrive_sure`:
-    the probability at which one sound window alone names a place arriving (None: never)."""
+    the probability at which one sound window alone names a place arriving (None: never);
+    `image_method`: the pictures' recogniser."""
     audio = make_recogniser("audio", audio_method)
     if accept_cosine is not None:  # another fixed acceptance than the method's
         audio.accept_cosine = accept_cosine
@@ -297,7 +300,7 @@ def walk(
     audio.featurize = remembered(audio.featurize)  # type: ignore[method-assign]
     X, y = plan["audio"]
     audio.fit(audio.featurize(X), y)
-    visual = make_recogniser("image", FRESH_METHODS["image"])
+    visual = make_recogniser("image", image_method)
     pictures, labels = plan["pictures"]
     visual.fit(visual.featurize(pictures), labels)
     stays: list[Stay] = plan["stays"]
@@ -509,6 +512,11 @@ def main() -> int:
         help="the sound's recogniser (default: what a retrain fits, %(default)s)",
     )
     parser.add_argument(
+        "--image-method",
+        default=FRESH_METHODS["image"],
+        help="the pictures' recogniser (default: what a retrain fits, %(default)s)",
+    )
+    parser.add_argument(
         "--half",
         type=int,
         choices=(0, 1),
@@ -542,7 +550,8 @@ def main() -> int:
     print(
         f"{sum(len(r) for r in data.recordings.values())} recordings, scenes with pictures and "
         f"sound: {', '.join(data.both)}; {args.draws} draws a size, {args.shots} windows and "
-        f"{args.pictures} pictures a place, stays of {args.stay:g} s, sound by {args.audio_method}"
+        f"{args.pictures} pictures a place, stays of {args.stay:g} s, sound by "
+        f"{args.audio_method}, pictures by {args.image_method}"
         + ("" if args.half is None else f", sources of half {args.half} only")
         + "; one window alone names a place at "
         + ", ".join(str(p or "never") for p in args.arrive_alone)
@@ -570,6 +579,7 @@ def main() -> int:
                             args.accept_cosine,
                             args.calibrated_accept,
                             sure,
+                            args.image_method,
                         )
                     )
                 print(f"  {size} places, draw {draw}: {', '.join(plan['taught'])}", flush=True)

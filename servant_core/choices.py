@@ -24,7 +24,7 @@ VISUAL_METHOD_NAMES = ("paper", "bovw", "softbovw", "fisher-bovw", "effnet")
 # train` and the demo use: the methods beyond the paper that lead on the wearer's walk and every
 # protocol (docs/research.md). A sample sense has one method (`senses.SAMPLE_METHOD`).
 FRESH_AUDIO_METHOD = "birdnet"
-FRESH_IMAGE_METHOD = "fisher-bovw"
+FRESH_IMAGE_METHOD = "effnet"
 
 POLICY_NAMES = ("sequential", "parallel", "learned")
 # What `servant run`, `predict`, `eval fusion` and the app fuse with unless told otherwise (the

@@ -213,11 +213,16 @@ def test_predict_says_an_unknown_place_at_a_building_site(shared_data, tmp_path)
     (visual,) = json.loads(result.stdout)["visual"]
     assert visual["confidence_unit"] == "× average" and 0.0 <= visual["confidence"] <= 2.0
     # the decision as the live engine makes it: on the probability of the sound's place and not
-    # elsewhere, the pictures as evidence, not votes. Pictures of streets beside the café's
-    # sound: before, they out-voted it ("No scene detected"), where the live engine said café.
+    # elsewhere, the pictures as evidence, not votes. Two pictures of streets and two of cafés
+    # beside the café's sound: as votes the café does not lead them ("No scene detected"); as
+    # evidence they cancel out, and the café's sound decides, as the live engine does.
     streets = [str(p) for p in sorted((shared_data / "images/dev/street").glob("*.jpg"))[20:24]]
-    result = servant("predict", str(model), "--audio", str(cafe), "--image", *streets, "--json")
-    decision = json.loads(result.stdout)["decision"]
+    cafes = [str(p) for p in sorted((shared_data / "images/dev/cafe").glob("*.jpg"))[21:23]]
+    mixed = [*streets[:2], *cafes]
+    result = servant("predict", str(model), "--audio", str(cafe), "--image", *mixed, "--json")
+    said = json.loads(result.stdout)
+    assert [v["scene"] for v in said["visual"]] == ["street", "street", "cafe", "cafe"], said
+    decision = said["decision"]
     assert decision["scene"] == "cafe" and decision["confidence"] >= 50, decision
     result = servant("predict", str(model), "--audio", str(site), "--image", *streets)
     assert result.stdout.splitlines()[-1].startswith("No scene detected"), result.stdout

@@ -27,6 +27,11 @@ TRAIN = "servant_core.cli.train"
 PREDICT = "servant_core.cli.predict"
 EVALUATION = "servant_core.cli.evaluation"
 
+IMAGE_METHOD_HELP = (
+    "visual method (paper: the paper's dominant colours; effnet: EfficientNet-Lite0's ImageNet "
+    "network, Apache-2.0; fisher-bovw: Servant's own, no network)"
+)
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add `train`, `predict`, `eval audio|image|fusion` and `table` with their options; each
@@ -165,7 +170,7 @@ def _register_eval_image(image: argparse.ArgumentParser) -> None:
         "--method",
         choices=sorted(VISUAL_METHOD_NAMES),
         default=FRESH_IMAGE_METHOD,
-        help="visual method (paper: the paper's dominant colours)",
+        help=IMAGE_METHOD_HELP,
     )
     image.add_argument("--scenes", help="comma-separated scenes to keep (default: all)")
     _seeds_option(image)
@@ -233,7 +238,7 @@ def _method_options(parser: argparse.ArgumentParser, paper: bool = False) -> Non
         "--image-method",
         choices=sorted(VISUAL_METHOD_NAMES),
         default="paper" if paper else FRESH_IMAGE_METHOD,
-        help="visual method (paper: the paper's dominant colours)",
+        help=IMAGE_METHOD_HELP,
     )
 
 

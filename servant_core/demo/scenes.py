@@ -118,12 +118,6 @@ def training_set(
     return np.stack(windows), window_scenes, pictures, picture_scenes
 
 
-# The demo's pictures are a few flat colours and shapes a scene: a codebook of 16 Gaussians fitted
-# on 10,000 descriptors tells them apart as the full one (64 on 50,000) does, in a tenth of the
-# time the full one takes at start-up (bench/cli_startup.py measures the demo).
-DEMO_IMAGE_PARAMS: dict[str, Any] = {"n_components": 16, "max_mixture_descriptors": 10_000}
-
-
 def demo_recognisers(seed: int = 0, *, paper: bool = True) -> tuple[Any, Any]:
     """Unfitted recognisers for the demo: the paper's (`paper`), or the methods beyond it."""
     if paper:
@@ -133,7 +127,7 @@ def demo_recognisers(seed: int = 0, *, paper: bool = True) -> tuple[Any, Any]:
         )
     return (
         make_recogniser("audio", FRESH_METHODS["audio"], rate=DEMO_RATE, random_state=seed),
-        make_recogniser("image", FRESH_METHODS["image"], random_state=seed, **DEMO_IMAGE_PARAMS),
+        make_recogniser("image", FRESH_METHODS["image"], random_state=seed),
     )
 
 

@@ -185,6 +185,7 @@ class BirdnetAcousticRecogniser(KMeansEncoderAcousticRecogniser):
         self.train_scenes_ = scenes_arr
         self.train_visits_ = scenes_arr if visits is None else np.asarray(visits).astype(str)
         self.train_derived_ = np.zeros(len(D), dtype=bool)
+        self.C_ = self._penalty()
         self._fit_heads()
         return self
 

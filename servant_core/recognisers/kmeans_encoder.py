@@ -85,6 +85,8 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
     calibrated_accept: bool = False
     # the share of a head with one class a place in `predict_proba` (`_proba`; `birdnet` has one)
     place_share: float = 0.0
+    # the head's penalty (None: chosen in `fit` by `_penalty`, which `effnet` does)
+    C: float | None
 
     def __init__(
         self,
@@ -196,8 +198,15 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         visit_arr = scenes_arr if visits is None else np.asarray(visits).astype(str)
         self.train_visits_ = np.tile(visit_arr, copies)
         self.train_derived_ = np.arange(len(D)) >= len(X)
+        self.C_ = self._penalty()
         self._fit_heads()
         return self
+
+    def _penalty(self) -> float:
+        """The head's C: the parameter (`effnet` chooses its own from the taught pictures)."""
+        if self.C is None:
+            raise ValueError(f"{self.method} needs a number for C")
+        return float(self.C)
 
     def _check_fit(
         self, X: np.ndarray, scenes: Sequence[str] | np.ndarray, visits: Any | None
@@ -276,7 +285,7 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
             visits,
             self.background_descriptors_,
             self._column_weights(),
-            C=self.C,
+            C=self.C_,
             elsewhere_weight=self.elsewhere_weight,
         )
 
@@ -390,6 +399,7 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
         novelty, novelty_arrays = self.novelty_head_.state()
         header = {
             "params": self.params(),
+            "C_": self.C_,
             "classes": self.classes_,
             "scenes": self.scenes_,
             "novelty": novelty,
@@ -431,6 +441,10 @@ class KMeansEncoderAcousticRecogniser(LinearHeadAnswers):
     def from_state(cls, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> Self:
         model = cls(**{**cls.legacy_params, **header["params"]})
         model.classes_ = [str(c) for c in header["classes"]]
+        chosen = header.get("C_", model.C)  # saved before C_: C itself
+        if not isinstance(chosen, int | float) or not 0 < chosen < float("inf"):
+            raise ValueError(f"its head's C is {chosen!r}")
+        model.C_ = float(chosen)
         model._read_featurizer(arrays)
         model.descriptor_mean_ = np.asarray(arrays["descriptor_mean"], dtype=np.float64)
         model.descriptor_scale_ = np.asarray(arrays["descriptor_scale"], dtype=np.float64)
