@@ -69,8 +69,9 @@ def weights_path() -> Path:
 
 def read_weights(path: Path) -> dict[str, np.ndarray]:
     """The state dict of `path`, if it is the file this method was measured with."""
-    data = path.read_bytes()
-    if hashlib.sha256(data).hexdigest() != WEIGHTS_SHA256:
+    with path.open("rb") as file:  # in chunks: not the 18 MB twice in memory
+        digest = hashlib.file_digest(file, "sha256").hexdigest()
+    if digest != WEIGHTS_SHA256:
         raise ServantError(f"{path}: not the EfficientNet-Lite0 weights expected; {MISSING}")
     try:
         return read_state_dict(path)
@@ -86,8 +87,8 @@ class Embedder:
     _shared: dict[int, Embedder] = {}
     _shared_lock = threading.Lock()
 
-    def __init__(self, weights: dict[str, np.ndarray], size: int) -> None:
-        model = onnx_model(weights, size)
+    def __init__(self, model: bytes) -> None:
+        """`model`: the network as ONNX bytes (`onnx_model`)."""
         self.net = cv2.dnn.readNetFromONNX(np.frombuffer(model, dtype=np.uint8))
         self.lock = threading.Lock()
 
@@ -95,7 +96,9 @@ class Embedder:
     def shared(cls, size: int) -> Embedder:
         with cls._shared_lock:
             if size not in cls._shared:
-                cls._shared[size] = cls(read_weights(weights_path()), size)
+                # the weights are let go once written as ONNX, before OpenCV builds its net:
+                # at most two copies of the 18 MB in memory at once, not three
+                cls._shared[size] = cls(onnx_model(read_weights(weights_path()), size))
             return cls._shared[size]
 
     def __call__(self, rgb: np.ndarray) -> np.ndarray:
