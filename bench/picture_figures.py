@@ -89,7 +89,7 @@ def figures(model: Any, X: np.ndarray, truth: np.ndarray, untaught: np.ndarray) 
         "untaught, largest": list(K * model.predict_proba(untaught).max(axis=1)),
         "log loss": list(-np.log(np.clip(own, 1e-12, None))),
         "named rightly": list(proba.argmax(axis=1) == column),
-        "C": [getattr(model, "C_", model.C)],  # fisher-bovw chooses its C; effnet has one
+        "C": [model.C_],
     }
 
 

@@ -34,6 +34,7 @@ from servant_core.features.torch_state import (
     read_pickle,
     read_state_dict,
 )
+from servant_core.library import read_picture
 from servant_core.modelfile import load_model, save_model
 from servant_core.recognisers import make_recogniser
 from servant_core.recognisers.effnet import C_GRID, weights_path
@@ -389,8 +390,8 @@ def test_other_pictures_of_a_taught_kind_read_clearly_above_and_below_average(
     taught = [p for s in paths for p in paths[s][:6]]
     tested = [p for s in paths for p in paths[s][6:46]]
     model = make_recogniser("image", "effnet")
-    X = model.featurize([cv2.imread(str(p)) for p in taught])
-    Y = model.featurize([cv2.imread(str(p)) for p in tested])
+    X = model.featurize([read_picture(p) for p in taught])
+    Y = model.featurize([read_picture(p) for p in tested])
     scenes = [p.parent.name for p in taught]
     truth = np.searchsorted(["cafe", "street"], [p.parent.name for p in tested])
     losses = {}

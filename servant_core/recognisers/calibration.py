@@ -9,7 +9,10 @@ flattest probabilities: every picture about 1.0× average) was taken.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
+from sklearn.model_selection import StratifiedKFold
 
 
 def held_out_losses(log_proba: np.ndarray, truth: np.ndarray) -> np.ndarray:
@@ -31,3 +34,26 @@ def least_regularised_within_error(losses: np.ndarray) -> int:
     best = int(np.argmin(means))
     error = losses[best].std(ddof=1) / np.sqrt(losses.shape[1]) if losses.shape[1] > 1 else 0.0
     return int(np.flatnonzero(means <= means[best] + error)[-1])
+
+
+def settings_losses(
+    labels: np.ndarray,
+    n_settings: int,
+    fold_log_proba: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    max_folds: int,
+    random_state: int | None,
+) -> np.ndarray | None:
+    """(settings, rows) held-out losses (`held_out_losses`) of every setting for every row of
+    `labels`, held out in stratified folds (at most `max_folds`, at most the fewest rows of a
+    label); `fold_log_proba(train, test)` gives (settings, len(test), labels) log probabilities
+    of the test rows by heads learned on the train rows. None with fewer than two folds."""
+    classes = np.unique(labels)
+    folds = min(max_folds, int(min(np.unique(labels, return_counts=True)[1])))
+    if folds < 2 or len(classes) < 2:
+        return None
+    log_proba = np.zeros((n_settings, len(labels), len(classes)))
+    cv = StratifiedKFold(folds, shuffle=True, random_state=random_state)
+    for train, test in cv.split(labels, labels):
+        log_proba[:, test] = fold_log_proba(train, test)
+    truth = np.searchsorted(classes, labels)
+    return np.array([held_out_losses(p, truth) for p in log_proba])

