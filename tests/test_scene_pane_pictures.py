@@ -24,6 +24,8 @@ from tests.test_tui_live import settle
 
 # the Scene pane's row (the log's lines read "sees cafe (2.0× average)")
 SEES = re.compile(r"sees\s+(\w+)\s+([\d.]+)× average")
+# the pane's count of the pictures taken in the fusion's window
+PICTURES = re.compile(r"pictures\s*(\d+)")
 
 
 def screen_text(app: ServantApp) -> str:
@@ -53,11 +55,16 @@ async def test_pictures_of_a_taught_kind_read_clearly_above_average_on_screen(
     )
     app = ServantApp(engine, library_root=tmp_path / "library")
     seen: list[tuple[str, float]] = []
+    counts: list[int] = []
     async with app.run_test(size=(120, 40)) as pilot:
 
         def three_pictures_shown() -> bool:
-            found = SEES.search(screen_text(app))
-            if found and (not seen or (found[1], float(found[2])) != seen[-1]):
+            # a reading for each picture taken: the "pictures" row counts them (two pictures
+            # may read alike, "2.0× average" at two places, so the figure cannot tell them apart)
+            text = screen_text(app)
+            found, taken = SEES.search(text), PICTURES.search(text)
+            if found and taken and (not counts or int(taken[1]) != counts[-1]):
+                counts.append(int(taken[1]))
                 seen.append((found[1], float(found[2])))
             return len(seen) >= 3
 
