@@ -16,28 +16,21 @@ from __future__ import annotations
 import argparse
 import functools
 import sys
-import tempfile
 from collections import defaultdict
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench import teach_augment  # noqa: E402
-from bench.common import shared_data  # noqa: E402
 from servant_core.cli import library_noise_silenced  # noqa: E402
 from servant_core.recognisers.birdnet import BirdnetAcousticRecogniser  # noqa: E402
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=shared_data())
+    teach_augment.add_walk_options(parser)
     parser.add_argument("--half", type=int, choices=(0, 1), required=True)
     parser.add_argument("--heads", default="1:0.5,2:0.5,4:0.5,8:0.5,4:0.45,8:0.4")
-    parser.add_argument("--sizes", default="2,3,5")
-    parser.add_argument("--draws", type=int, default=6)
-    parser.add_argument(
-        "--cache", type=Path, default=Path(tempfile.gettempdir()) / "servant-teach-augment"
-    )
     args = parser.parse_args()
     if not (args.data / "audio" / "dev").is_dir():
         print(f"no real data at {args.data}; nothing to measure")

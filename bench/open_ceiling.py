@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tempfile
 import warnings
 from collections import defaultdict
 from pathlib import Path
@@ -38,7 +37,6 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench import teach_augment  # noqa: E402
-from bench.common import shared_data  # noqa: E402
 from servant_core.cli import library_noise_silenced  # noqa: E402
 from servant_core.recognisers import UNKNOWN  # noqa: E402
 from servant_core.recognisers.birdnet import BirdnetAcousticRecogniser  # noqa: E402
@@ -153,13 +151,8 @@ def measure_draw(
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=shared_data())
+    teach_augment.add_walk_options(parser)
     parser.add_argument("--halves", default="0,1")
-    parser.add_argument("--sizes", default="2,3,5")
-    parser.add_argument("--draws", type=int, default=6)
-    parser.add_argument(
-        "--cache", type=Path, default=Path(tempfile.gettempdir()) / "servant-teach-augment"
-    )
     args = parser.parse_args()
     if not (args.data / "audio" / "dev").is_dir():
         print(f"no real data at {args.data}; nothing to measure")

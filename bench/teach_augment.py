@@ -330,19 +330,25 @@ def spread(values: list[float]) -> str:
     return f"{np.mean(values):.3f} ({min(values):.3f}-{max(values):.3f})"
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def add_walk_options(parser: argparse.ArgumentParser) -> None:
+    """The options every bench on these cached walks takes: the data, the library sizes, the
+    draws a size and the cache of embedded windows."""
     parser.add_argument("--data", type=Path, default=shared_data())
-    parser.add_argument("--half", type=int, choices=(0, 1), required=True)
     parser.add_argument("--sizes", default="2,3,5")
     parser.add_argument("--draws", type=int, default=6)
-    parser.add_argument("--recipes", default=",".join(RECIPES))
     parser.add_argument(
         "--cache",
         type=Path,
         default=Path(tempfile.gettempdir()) / "servant-teach-augment",
         help="where the embedded windows are kept between runs (default: %(default)s)",
     )
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_walk_options(parser)
+    parser.add_argument("--half", type=int, choices=(0, 1), required=True)
+    parser.add_argument("--recipes", default=",".join(RECIPES))
     parser.add_argument(
         "--modes",
         default="heard,derived,accept",
