@@ -14,8 +14,9 @@ engine, no smoothing), per window:
   taught window (`cosine`), that cosine over the median of the taught windows' own nearest
   cosines, leave one out (`cosine / own`);
 - `background`: a threshold each library calibrates itself, from what it was taught: the largest
-  open probability any window of the shipped background reaches when its recording is held out
-  of the head (six folds by recording); a window is its likeliest place above it;
+  open probability any window of the shipped background reaches in a model whose background
+  leaves its recording out (`background_exclude`, six folds by recording); a window is its
+  likeliest place above it;
 - `self-taught`: the walk in order, each window the product names a place at 90 % or more folded
   into that place (at most 24 a place), so that a place follows its own sound as it drifts.
 
@@ -41,11 +42,6 @@ from servant_core.cli import library_noise_silenced  # noqa: E402
 from servant_core.recognisers import UNKNOWN  # noqa: E402
 from servant_core.recognisers.birdnet import BirdnetAcousticRecogniser  # noqa: E402
 from servant_core.recognisers.centroids import unit_rows  # noqa: E402
-from servant_core.recognisers.visit_head import (  # noqa: E402
-    fit_visit_head,
-    place_proba,
-    softmax_proba,
-)
 
 UNTAUGHT_LET_THROUGH = 0.02
 BACKGROUND_FOLDS = 6
@@ -54,30 +50,19 @@ SELF_AT_MOST = 24
 KINDS = ("taught", "untaught")
 
 
-def held_out_background(model: BirdnetAcousticRecogniser, recordings: np.ndarray) -> np.ndarray:
-    """The largest open probability of each background window, its recording held out of the
-    head (`BACKGROUND_FOLDS` folds by recording)."""
-    B = model.background_descriptors_
-    names = np.unique(recordings)
-    fold_of = dict(zip(names, np.arange(len(names)) % BACKGROUND_FOLDS, strict=True))
-    folds = np.array([fold_of[r] for r in recordings])
-    out = np.empty(len(B))
+def held_out_background(X: np.ndarray, y: np.ndarray, background: Any) -> np.ndarray:
+    """The largest open probability of each window of the `background`, from a model taught
+    windows `X` of places `y` with that window's recording kept out of its background
+    (`background_exclude`, `BACKGROUND_FOLDS` folds by recording)."""
+    names = np.unique(background.recordings)
+    folds = np.arange(len(names)) % BACKGROUND_FOLDS
+    out = np.empty(len(background.recordings))
     for fold in range(BACKGROUND_FOLDS):
-        held = folds == fold
-        head = fit_visit_head(
-            model.train_descriptors_,
-            model.train_scenes_,
-            model.train_visits_,
-            B[~held],
-            model._column_weights(),
-            C=model.C_,
-            elsewhere_weight=model.elsewhere_weight,
-        )
-        coef = np.vstack([head.coef, head.elsewhere_coef])
-        intercept = np.concatenate([head.intercept, head.elsewhere_intercept])
-        proba = softmax_proba((B[held] @ coef.T + intercept) / model.temperature)
-        modes = proba[:, : len(head.mode_scenes)]
-        out[held] = place_proba(modes, head.mode_scenes, head.classes, together=True).max(axis=1)
+        kept_out = names[folds == fold]
+        held = np.isin(background.recordings, kept_out)
+        model = BirdnetAcousticRecogniser(background_exclude=tuple(kept_out)).fit(X, y)
+        frames = background.frames[held].reshape(int(held.sum()), -1)
+        out[held] = model._open_proba(model._space(frames)).max(axis=1)
     return out
 
 
@@ -95,7 +80,8 @@ def window_scores(model: BirdnetAcousticRecogniser, X: np.ndarray) -> dict[str, 
     names = np.array(model.classes_)[np.argmax(open_p, axis=1)]
     rows = unit_rows(D)
     cosine = np.array([np.max(rows[i] @ model._taught_rows(n).T) for i, n in enumerate(names)])
-    own = np.array([own_cosine(model, n) for n in names])
+    own_of = {place: own_cosine(model, place) for place in model.classes_}  # once a place
+    own = np.array([own_of[n] for n in names])
     return {
         "names": names,
         "today": model.answers(X)[0],
@@ -118,7 +104,7 @@ def self_taught(model: BirdnetAcousticRecogniser, X: np.ndarray) -> np.ndarray:
 
 
 def measure_draw(
-    plan: dict[str, Any], X_all: np.ndarray, background_recordings: np.ndarray
+    plan: dict[str, Any], X_all: np.ndarray, background: Any
 ) -> dict[str, tuple[float, float]]:
     """{row: (right at taught, named at untaught)} of one draw; the ceiling rows' second figure
     is their threshold."""
@@ -129,7 +115,8 @@ def measure_draw(
     kinds = np.concatenate([[s.kind] * len(s.windows) for s in stays])
     truth = np.concatenate([[s.truth or ""] * len(s.windows) for s in stays]).astype(str)
     taught, untaught = kinds == "taught", kinds == "untaught"
-    model = BirdnetAcousticRecogniser().fit(X_all[ids], np.asarray(y).astype(str))
+    y = np.asarray(y).astype(str)
+    model = BirdnetAcousticRecogniser().fit(X_all[ids], y)
     scores = window_scores(model, X_all[windows])
     rightly = scores["names"] == truth
 
@@ -143,7 +130,7 @@ def measure_draw(
         threshold = float(np.quantile(scores[score][untaught], 1 - UNTAUGHT_LET_THROUGH))
         right = float(np.mean((rightly & (scores[score] > threshold))[taught]))
         out[f"ceiling, {score}"] = (right, threshold)
-    limit = held_out_background(model, background_recordings).max()
+    limit = held_out_background(X_all[ids], y, background).max()
     out["background"] = figures(np.where(scores["open"] > limit, scores["names"], UNKNOWN))
     out["self-taught"] = figures(self_taught(model, X_all[windows]))
     return out
@@ -173,7 +160,7 @@ def main() -> int:
                 plan = teach_augment.plan(data, size, draw)
                 if not any(s.kind == "taught" for s in plan["stays"]):
                     continue  # no later windows of the taught recordings to walk
-                for row, pair in measure_draw(plan, X_all, found.recordings).items():
+                for row, pair in measure_draw(plan, X_all, found).items():
                     rows[row].append(pair)
             print(f"half {half}, {size} places, {len(rows['today'])} draws: mean (range)")
             for row, pairs in rows.items():
