@@ -176,7 +176,7 @@ def teach_place(term: Terminal, place: str, pose: dict[str, float]) -> None:
         term.keys("app", "Enter")  # *Record 5 s*
         term.wait_for("app", rf"{n} window\(s\) recorded", 30)
     term.keys("app", "C-n")
-    term.wait_for("app", r"Take pictures of the place", 10)
+    term.wait_for("app", r"Take about six pictures of the place", 10)
     for n in (1, 2, 3):
         term.keys("app", "Enter")  # *Take picture*
         term.wait_for("app", rf"{n} picture\(s\) taken", 15)

@@ -28,7 +28,7 @@ class PicturesStep(TeachStep):
         self._one_picture_at_a_time = threading.Lock()
 
     def compose(self) -> ComposeResult:
-        yield Label("Take pictures of the place (the camera's dominant colours are learnt).")
+        yield Label("Take about six pictures of the place: what the camera sees is learnt.")
         yield every_press(Button("Take picture", id="take-picture", variant="primary"))
         yield Static(id="picture-status")
 
