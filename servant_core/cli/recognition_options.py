@@ -28,7 +28,7 @@ PREDICT = "servant_core.cli.predict"
 EVALUATION = "servant_core.cli.evaluation"
 
 IMAGE_METHOD_HELP = (
-    "visual method (paper: the paper's dominant colours; effnet: EfficientNet-Lite0's ImageNet "
+    "visual method (paper: the paper's dominant colours; effnet: EfficientNet-Lite2's ImageNet "
     "network, Apache-2.0; fisher-bovw: Servant's own, no network)"
 )
 

@@ -44,7 +44,6 @@ from servant_core.recognisers.birdnet import BirdnetAcousticRecogniser
 from servant_core.recognisers.calibration import settings_losses
 
 
-
 @dataclass(frozen=True)
 class Weights:
     """Where a network's weights come from: the file in its package, and the digest of the file
