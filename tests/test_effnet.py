@@ -330,7 +330,7 @@ def test_the_network_names_imagenet_classes_of_what_the_photographs_show(
     bookcase before the library)."""
     state = read_state_dict(weights_path(network))
     size = VARIANTS[network].size
-    graph = onnx_model(state, size, classifier=True, variant=VARIANTS[network])
+    graph = onnx_model(state, classifier=True, variant=VARIANTS[network])  # at its own side
     net = cv2.dnn.readNetFromONNX(np.frombuffer(graph, np.uint8))
     expected = {  # ImageNet class numbers
         "supermarket/supermarket-00000001.jpg": {582},  # grocery store

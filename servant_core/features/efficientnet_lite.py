@@ -47,7 +47,6 @@ class Variant:
 
 
 VARIANTS = {"lite0": Variant(1.0, 1.0, 224), "lite2": Variant(1.1, 1.2, 260)}
-INPUT_SIZE = VARIANTS["lite0"].size
 DIVISOR = 8  # a scaled width is a multiple of this
 
 
@@ -160,14 +159,15 @@ def check_weights(state: Mapping[str, np.ndarray], variant: Variant = VARIANTS["
 
 def onnx_model(
     state: Mapping[str, np.ndarray],
-    size: int = INPUT_SIZE,
+    size: int | None = None,
     classifier: bool = False,
     variant: Variant = VARIANTS["lite0"],
 ) -> bytes:
-    """`variant`'s network as ONNX bytes for (1, 3, size, size) input: output `embedding`
-    (1, 1280), the pooled features, and with `classifier` also `logits` (1, 1000), ImageNet's
-    classes."""
+    """`variant`'s network as ONNX bytes for (1, 3, size, size) input (None: the side it was
+    trained at): output `embedding` (1, 1280), the pooled features, and with `classifier` also
+    `logits` (1, 1000), ImageNet's classes."""
     check_weights(state, variant)
+    size = variant.size if size is None else size
     graph = Graph()
     six = (graph.weight("zero", np.array(0.0)), graph.weight("six", np.array(6.0)))
 
@@ -207,4 +207,4 @@ def onnx_model(
         fc = (graph.weight("fc.w", state["_fc.weight"]), graph.weight("fc.b", state["_fc.bias"]))
         graph.add("Gemm", [embedding, *fc], "logits", transB=1)
         outputs["logits"] = (1, CLASSES)
-    return graph.model({"image": (1, 3, size, size)}, outputs, "efficientnet-lite0")
+    return graph.model({"image": (1, 3, size, size)}, outputs, "efficientnet-lite")
